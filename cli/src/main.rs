@@ -7,7 +7,11 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "lhm", version, about = "Long-horizon, reset-free humanoid object transport")]
+#[command(
+    name = "lhm",
+    version,
+    about = "Long-horizon, reset-free humanoid object transport"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -90,16 +90,27 @@ pub fn run(args: ScenesArgs) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        ScenesCommand::Render { task, output, source } => render_cmd(&source.load()?, &task, &output),
+        ScenesCommand::Render {
+            task,
+            output,
+            source,
+        } => render_cmd(&source.load()?, &task, &output),
     }
 }
 
 fn generate_cmd(dir: &Path, seed: u64, check: bool) -> Result<ExitCode> {
     let cat_path = dir.join(lhm_scenes::load::CATALOGUE_FILE);
-    let text = std::fs::read_to_string(&cat_path)
-        .with_context(|| format!("reading {} (run from the repository root or pass --dir)", cat_path.display()))?;
+    let text = std::fs::read_to_string(&cat_path).with_context(|| {
+        format!(
+            "reading {} (run from the repository root or pass --dir)",
+            cat_path.display()
+        )
+    })?;
     let catalogue = Catalogue::parse(&text, &cat_path.display().to_string())?;
-    let cfg = GenerateConfig { seed, ..GenerateConfig::default() };
+    let cfg = GenerateConfig {
+        seed,
+        ..GenerateConfig::default()
+    };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} tasks ({elapsed})")
             .expect("static template")
@@ -130,7 +141,10 @@ fn generate_cmd(dir: &Path, seed: u64, check: bool) -> Result<ExitCode> {
         }
     }
     if !differ.is_empty() {
-        bail!("generated tasks differ from the committed files: {}", differ.join(", "));
+        bail!(
+            "generated tasks differ from the committed files: {}",
+            differ.join(", ")
+        );
     }
     if check {
         println!("committed task files match a fresh generation (seed {seed})");
@@ -140,7 +154,10 @@ fn generate_cmd(dir: &Path, seed: u64, check: bool) -> Result<ExitCode> {
 
 fn validate_cmd(b: &Benchmark, only: Option<Split>) -> Result<ExitCode> {
     let problems = validate_benchmark(b, only, &Clearance::default());
-    for split in Split::ALL.into_iter().filter(|s| only.is_none_or(|o| o == *s)) {
+    for split in Split::ALL
+        .into_iter()
+        .filter(|s| only.is_none_or(|o| o == *s))
+    {
         let n = b.tasks(split).len();
         let bad = problems
             .iter()
@@ -151,11 +168,17 @@ fn validate_cmd(b: &Benchmark, only: Option<Split>) -> Result<ExitCode> {
     for p in &problems {
         eprintln!("invalid: {p}");
     }
-    Ok(if problems.is_empty() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+    Ok(if problems.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
 }
 
 fn render_cmd(b: &Benchmark, id: &str, output: &Path) -> Result<ExitCode> {
-    let (_, task) = b.task(id).with_context(|| format!("no task {id:?} (see `lhm scenes stats`)"))?;
+    let (_, task) = b
+        .task(id)
+        .with_context(|| format!("no task {id:?} (see `lhm scenes stats`)"))?;
     let legs = match plan_task(task, &Clearance::default()) {
         Ok(legs) => Some(legs),
         Err(e) => {
@@ -164,10 +187,16 @@ fn render_cmd(b: &Benchmark, id: &str, output: &Path) -> Result<ExitCode> {
         }
     };
     let canvas = render_task(task, &b.catalogue, legs.as_deref());
-    let file = std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
+    let file =
+        std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
     canvas
         .write_png(std::io::BufWriter::new(file))
         .with_context(|| format!("writing {}", output.display()))?;
-    println!("wrote {} ({}x{})", output.display(), canvas.width, canvas.height);
+    println!(
+        "wrote {} ({}x{})",
+        output.display(),
+        canvas.width,
+        canvas.height
+    );
     Ok(ExitCode::SUCCESS)
 }

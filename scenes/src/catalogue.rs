@@ -47,16 +47,25 @@ impl Catalogue {
                 );
             }
             if !o.movable && o.placement.is_none() {
-                return err(at("placement"), format!("{}: static object needs a placement", o.name));
+                return err(
+                    at("placement"),
+                    format!("{}: static object needs a placement", o.name),
+                );
             }
             if !o.movable && o.on_surface {
-                return err(at("on_surface"), format!("{}: only movable objects", o.name));
+                return err(
+                    at("on_surface"),
+                    format!("{}: only movable objects", o.name),
+                );
             }
         }
         for room in RoomType::ALL {
             let n = self.rooms.iter().filter(|r| r.room_type == room).count();
             if n != 1 {
-                return err("room".into(), format!("{room}: {n} specifications, expected 1"));
+                return err(
+                    "room".into(),
+                    format!("{room}: {n} specifications, expected 1"),
+                );
             }
         }
         for (i, r) in self.rooms.iter().enumerate() {

@@ -9,7 +9,7 @@ use crate::catalogue::Catalogue;
 use crate::geometry::{dist, room_rect, Rect};
 use crate::language::{describe_goal, instruction, Phrasing};
 use crate::model::{
-    MovableObject, Obstacle, ObjectType, Placement, PlacementStep, RoomType, Split, SplitFile,
+    MovableObject, ObjectType, Obstacle, Placement, PlacementStep, RoomType, Split, SplitFile,
     StartPose, Support, Task, Wall, TASK_FILE_SCHEMA,
 };
 use crate::rng::{hash_str, SplitMix64};
@@ -74,8 +74,13 @@ pub fn generate(
                 .extension_lengths
                 .iter()
                 .flat_map(|&n| {
-                    (0..cfg.extension_per_length)
-                        .map(move |i| (format!("extension-{n}obj-{:02}", i + 1), RoomType::ALL[i % 4], n))
+                    (0..cfg.extension_per_length).map(move |i| {
+                        (
+                            format!("extension-{n}obj-{:02}", i + 1),
+                            RoomType::ALL[i % 4],
+                            n,
+                        )
+                    })
                 })
                 .collect(),
         };
@@ -95,7 +100,10 @@ pub fn generate(
                     last = "sampling failed".into();
                     continue;
                 };
-                if let Some(p) = validate_task(&task, split, cat, &clearance).into_iter().next() {
+                if let Some(p) = validate_task(&task, split, cat, &clearance)
+                    .into_iter()
+                    .next()
+                {
                     last = p;
                     continue;
                 }
@@ -108,7 +116,11 @@ pub fn generate(
                         last = "object choice occurs in train".into();
                         continue;
                     }
-                    if task.sequence.iter().any(|st| train_instructions.contains(&st.instruction)) {
+                    if task
+                        .sequence
+                        .iter()
+                        .any(|st| train_instructions.contains(&st.instruction))
+                    {
                         last = "instruction occurs in train".into();
                         continue;
                     }
@@ -116,7 +128,7 @@ pub fn generate(
                 found = Some(task);
                 break;
             }
-            let task = found.ok_or_else(|| GenerateError {
+            let task = found.ok_or(GenerateError {
                 split,
                 index,
                 attempts: cfg.max_attempts,
@@ -130,7 +142,11 @@ pub fn generate(
             tasks.push(task);
             progress(split, tasks.len(), jobs.len());
         }
-        out.push(SplitFile { schema: TASK_FILE_SCHEMA, split, tasks });
+        out.push(SplitFile {
+            schema: TASK_FILE_SCHEMA,
+            split,
+            tasks,
+        });
     }
     Ok(out)
 }
@@ -194,7 +210,10 @@ impl Sampler<'_> {
             room_size: [w, d],
             centroid,
             window_wall: *self.rng.pick(&Wall::ALL),
-            start: StartPose { pos: [0.0, 0.0], yaw: 0.0 },
+            start: StartPose {
+                pos: [0.0, 0.0],
+                yaw: 0.0,
+            },
             obstacles: Vec::new(),
             objects: Vec::new(),
             sequence: Vec::new(),
@@ -208,7 +227,11 @@ impl Sampler<'_> {
     }
 
     fn furnish(&mut self, task: &mut Task, n: usize) -> Option<()> {
-        let pool: Vec<&ObjectType> = self.cat.statics().filter(|t| t.rooms.contains(&task.room)).collect();
+        let pool: Vec<&ObjectType> = self
+            .cat
+            .statics()
+            .filter(|t| t.rooms.contains(&task.room))
+            .collect();
         let mut kinds: Vec<&ObjectType> = Vec::new();
         while kinds.len() < n {
             let t = *self.rng.pick(&pool);
@@ -226,7 +249,11 @@ impl Sampler<'_> {
         kinds.sort_by(|a, b| (b.size[0] * b.size[1]).total_cmp(&(a.size[0] * a.size[1])));
         let room = room_rect(task.room_size);
         let (hw, hd) = (task.room_size[0] / 2.0, task.room_size[1] / 2.0);
-        let free_radius = if task.room == RoomType::Warehouse { 3.8 } else { hw.min(hd) - 0.3 };
+        let free_radius = if task.room == RoomType::Warehouse {
+            3.8
+        } else {
+            hw.min(hd) - 0.3
+        };
         for (i, t) in kinds.into_iter().enumerate() {
             let [l, dep, _] = t.size;
             let mut placed = None;
@@ -252,9 +279,19 @@ impl Sampler<'_> {
                     _ => {
                         let a = self.rng.range(-PI, PI);
                         let r = free_radius * self.rng.unit().sqrt();
-                        let jitter = if self.rng.chance(0.5) { self.rng.range(-0.35, 0.35) } else { 0.0 };
+                        let jitter = if self.rng.chance(0.5) {
+                            self.rng.range(-0.35, 0.35)
+                        } else {
+                            0.0
+                        };
                         let yaw = self.rng.index(4) as f64 * FRAC_PI_2 + jitter;
-                        ([task.centroid[0] + r * a.cos(), task.centroid[1] + r * a.sin()], wrap_angle(yaw))
+                        (
+                            [
+                                task.centroid[0] + r * a.cos(),
+                                task.centroid[1] + r * a.sin(),
+                            ],
+                            wrap_angle(yaw),
+                        )
                     }
                 };
                 let pos = [mm(pos[0]), mm(pos[1])];
@@ -263,14 +300,24 @@ impl Sampler<'_> {
                 if !room.contains_rect(&rect, 0.01) {
                     continue;
                 }
-                if task.obstacles.iter().any(|o| obstacle_rect(o).overlaps(&rect, 0.1)) {
+                if task
+                    .obstacles
+                    .iter()
+                    .any(|o| obstacle_rect(o).overlaps(&rect, 0.1))
+                {
                     continue;
                 }
                 placed = Some((pos, yaw));
                 break;
             }
             let (pos, yaw) = placed?;
-            task.obstacles.push(Obstacle { id: format!("o{i}"), kind: t.name.clone(), pos, yaw, size: t.size });
+            task.obstacles.push(Obstacle {
+                id: format!("o{i}"),
+                kind: t.name.clone(),
+                pos,
+                yaw,
+                size: t.size,
+            });
         }
         Some(())
     }
@@ -286,33 +333,55 @@ impl Sampler<'_> {
     }
 
     /// A resting pose for `t` that avoids `occupied` footprints (with their supports).
-    fn rest_pose(&mut self, task: &Task, t: &ObjectType, occupied: &[(Rect, Support)], on_surface_p: f64) -> Option<Pose> {
+    fn rest_pose(
+        &mut self,
+        task: &Task,
+        t: &ObjectType,
+        occupied: &[(Rect, Support)],
+        on_surface_p: f64,
+    ) -> Option<Pose> {
         let surfaces = self.surfaces(task);
         let room = room_rect(task.room_size);
         for _ in 0..80 {
-            let (pos, yaw, on) = if t.on_surface && !surfaces.is_empty() && self.rng.chance(on_surface_p) {
-                let sid = self.rng.pick(&surfaces).clone();
-                let o = task.obstacle(&sid)?;
-                let top = obstacle_rect(o);
-                let quarter = self.rng.index(4);
-                let yaw = wrap_angle(o.yaw + quarter as f64 * FRAC_PI_2);
-                let (ol, ow) = if quarter % 2 == 0 { (t.size[0], t.size[1]) } else { (t.size[1], t.size[0]) };
-                let ax = top.half[0] - ol / 2.0 - 0.03;
-                let ay = top.half[1] - ow / 2.0 - 0.03;
-                if ax < 0.0 || ay < 0.0 {
-                    continue;
-                }
-                // Toward the front edge (+y, away from the wall for wall furniture) so a person
-                // standing there can reach it.
-                let ly = ay * self.rng.range(0.3, 1.0);
-                let p = top.to_world([self.rng.range(-ax, ax), ly]);
-                ([p[0], p[1], o.size[2] + t.size[2] / 2.0], yaw, Support::Surface(sid))
-            } else {
-                let a = self.rng.range(-PI, PI);
-                let r = (MAX_RADIUS - 0.02) * self.rng.unit().sqrt();
-                let p = [task.centroid[0] + r * a.cos(), task.centroid[1] + r * a.sin()];
-                ([p[0], p[1], t.size[2] / 2.0], self.rng.range(-PI, PI), Support::Floor)
-            };
+            let (pos, yaw, on) =
+                if t.on_surface && !surfaces.is_empty() && self.rng.chance(on_surface_p) {
+                    let sid = self.rng.pick(&surfaces).clone();
+                    let o = task.obstacle(&sid)?;
+                    let top = obstacle_rect(o);
+                    let quarter = self.rng.index(4);
+                    let yaw = wrap_angle(o.yaw + quarter as f64 * FRAC_PI_2);
+                    let (ol, ow) = if quarter % 2 == 0 {
+                        (t.size[0], t.size[1])
+                    } else {
+                        (t.size[1], t.size[0])
+                    };
+                    let ax = top.half[0] - ol / 2.0 - 0.03;
+                    let ay = top.half[1] - ow / 2.0 - 0.03;
+                    if ax < 0.0 || ay < 0.0 {
+                        continue;
+                    }
+                    // Toward the front edge (+y, away from the wall for wall furniture) so a person
+                    // standing there can reach it.
+                    let ly = ay * self.rng.range(0.3, 1.0);
+                    let p = top.to_world([self.rng.range(-ax, ax), ly]);
+                    (
+                        [p[0], p[1], o.size[2] + t.size[2] / 2.0],
+                        yaw,
+                        Support::Surface(sid),
+                    )
+                } else {
+                    let a = self.rng.range(-PI, PI);
+                    let r = (MAX_RADIUS - 0.02) * self.rng.unit().sqrt();
+                    let p = [
+                        task.centroid[0] + r * a.cos(),
+                        task.centroid[1] + r * a.sin(),
+                    ];
+                    (
+                        [p[0], p[1], t.size[2] / 2.0],
+                        self.rng.range(-PI, PI),
+                        Support::Floor,
+                    )
+                };
             let pos = [mm(pos[0]), mm(pos[1]), mm(pos[2])];
             let yaw = mm(yaw);
             let fp = footprint(pos, yaw, t.size);
@@ -321,11 +390,17 @@ impl Sampler<'_> {
             }
             if on == Support::Floor
                 && (!room.contains_rect(&fp, 0.05)
-                    || task.obstacles.iter().any(|o| obstacle_rect(o).overlaps(&fp, 0.15)))
+                    || task
+                        .obstacles
+                        .iter()
+                        .any(|o| obstacle_rect(o).overlaps(&fp, 0.15)))
             {
                 continue;
             }
-            if occupied.iter().any(|(r, s)| *s == on && r.overlaps(&fp, 0.2)) {
+            if occupied
+                .iter()
+                .any(|(r, s)| *s == on && r.overlaps(&fp, 0.2))
+            {
                 continue;
             }
             return Some((pos, yaw, on));
@@ -334,7 +409,11 @@ impl Sampler<'_> {
     }
 
     fn place_objects(&mut self, task: &mut Task, n: usize) -> Option<()> {
-        let mut pool: Vec<&ObjectType> = self.cat.movable().filter(|t| t.rooms.contains(&task.room)).collect();
+        let mut pool: Vec<&ObjectType> = self
+            .cat
+            .movable()
+            .filter(|t| t.rooms.contains(&task.room))
+            .collect();
         if pool.len() < n {
             return None;
         }
@@ -355,8 +434,7 @@ impl Sampler<'_> {
             });
         }
         // Goals in sequence: object k's goal avoids objects still waiting and goals already used.
-        for k in 0..n {
-            let t = kinds[k];
+        for (k, t) in kinds.iter().enumerate() {
             let waiting: Vec<(Rect, Support)> = task.objects[k + 1..]
                 .iter()
                 .map(|o| (footprint(o.pos, o.yaw, o.size), o.on.clone()))
@@ -395,20 +473,35 @@ impl Sampler<'_> {
             if !(1.0..=3.0).contains(&r) {
                 continue;
             }
-            if task.obstacles.iter().any(|o| obstacle_rect(o).distance(p) < 0.4) {
+            if task
+                .obstacles
+                .iter()
+                .any(|o| obstacle_rect(o).distance(p) < 0.4)
+            {
                 continue;
             }
-            if task.objects.iter().any(|o| footprint(o.pos, o.yaw, o.size).distance(p) < 0.6) {
+            if task
+                .objects
+                .iter()
+                .any(|o| footprint(o.pos, o.yaw, o.size).distance(p) < 0.6)
+            {
                 continue;
             }
-            task.start = StartPose { pos: p, yaw: mm(self.rng.range(-PI, PI)) };
+            task.start = StartPose {
+                pos: p,
+                yaw: mm(self.rng.range(-PI, PI)),
+            };
             return Some(());
         }
         None
     }
 
     fn describe(&mut self, task: &mut Task) {
-        let phrasing = if self.split == Split::Unseen { Phrasing::Unseen } else { Phrasing::Train };
+        let phrasing = if self.split == Split::Unseen {
+            Phrasing::Unseen
+        } else {
+            Phrasing::Train
+        };
         for k in 0..task.sequence.len() {
             let step = &task.sequence[k];
             let display = task

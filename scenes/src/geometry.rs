@@ -75,7 +75,12 @@ impl Rect {
     /// candidate axis (i.e. they overlap once each is grown by `gap / 2`; corners are treated as
     /// square, which errs on the side of reporting an overlap).
     pub fn overlaps(&self, other: &Rect, gap: f64) -> bool {
-        let axes = [self.axes()[0], self.axes()[1], other.axes()[0], other.axes()[1]];
+        let axes = [
+            self.axes()[0],
+            self.axes()[1],
+            other.axes()[0],
+            other.axes()[1],
+        ];
         axes.iter().all(|&axis| {
             let (a0, a1) = self.project(axis);
             let (b0, b1) = other.project(axis);
@@ -144,7 +149,11 @@ mod tests {
         let top = Rect::new([0.0, 0.0], [1.2, 0.6], 0.3);
         let small = Rect::new(top.to_world([0.2, 0.0]), [0.3, 0.2], 0.3);
         assert!(top.contains_rect(&small, 0.02));
-        let sideways = Rect::new(top.to_world([0.2, 0.0]), [0.3, 0.2], 0.3 + 1.5708);
+        let sideways = Rect::new(
+            top.to_world([0.2, 0.0]),
+            [0.3, 0.2],
+            0.3 + std::f64::consts::FRAC_PI_2,
+        );
         assert!(top.contains_rect(&sideways, 0.02));
         let off = Rect::new(top.to_world([0.5, 0.0]), [0.3, 0.2], 0.3);
         assert!(!top.contains_rect(&off, 0.0));

@@ -51,7 +51,9 @@ fn landmarks(task: &Task, cat: &Catalogue, p: [f64; 2], skip: Option<&str>) -> V
         .iter()
         .filter(|o| Some(o.id.as_str()) != skip && unique(&o.kind))
         .map(|o| {
-            let name = cat.get(&o.kind).map_or(o.kind.clone(), |t| t.display.clone());
+            let name = cat
+                .get(&o.kind)
+                .map_or(o.kind.clone(), |t| t.display.clone());
             (name, obstacle_rect(o).distance(p))
         })
         .collect();
@@ -74,8 +76,15 @@ pub fn describe_goal(
             let Some(surface) = task.obstacle(id) else {
                 return "on the surface".into();
             };
-            let name = cat.get(&surface.kind).map_or(surface.kind.as_str(), |t| t.display.as_str());
-            let twin = task.obstacles.iter().filter(|o| o.kind == surface.kind).count() > 1;
+            let name = cat
+                .get(&surface.kind)
+                .map_or(surface.kind.as_str(), |t| t.display.as_str());
+            let twin = task
+                .obstacles
+                .iter()
+                .filter(|o| o.kind == surface.kind)
+                .count()
+                > 1;
             let others = landmarks(task, cat, p, Some(id));
             let qualifier = if near_window && (twin || rng.chance(0.5)) {
                 " by the window".to_string()
@@ -94,7 +103,9 @@ pub fn describe_goal(
             let marks = landmarks(task, cat, p, None);
             let floor = if rng.chance(0.3) { "on the floor " } else { "" };
             match (marks.first(), marks.get(1)) {
-                (Some((a, da)), Some((b, db))) if *da < 1.0 && *db < 1.2 && a != b && rng.chance(0.3) => {
+                (Some((a, da)), Some((b, db)))
+                    if *da < 1.0 && *db < 1.2 && a != b && rng.chance(0.3) =>
+                {
                     format!("{floor}between the {a} and the {b}")
                 }
                 (Some((a, da)), _) if *da < 0.9 => {
@@ -111,10 +122,17 @@ pub fn describe_goal(
 }
 
 /// One instruction for moving `object_display` to the described goal.
-pub fn instruction(rng: &mut SplitMix64, phrasing: Phrasing, object_display: &str, goal: &str) -> String {
+pub fn instruction(
+    rng: &mut SplitMix64,
+    phrasing: Phrasing,
+    object_display: &str,
+    goal: &str,
+) -> String {
     let frame = match phrasing {
         Phrasing::Train => *rng.pick(&TRAIN_FRAMES),
         Phrasing::Unseen => *rng.pick(&UNSEEN_FRAMES),
     };
-    frame.replace("{obj}", object_display).replace("{goal}", goal)
+    frame
+        .replace("{obj}", object_display)
+        .replace("{goal}", goal)
 }

@@ -50,7 +50,8 @@ impl Benchmark {
         dir: &str,
         read: impl Fn(&str) -> Result<String, SceneError>,
     ) -> Result<Self, SceneError> {
-        let catalogue = Catalogue::parse(&read(CATALOGUE_FILE)?, &format!("{dir}/{CATALOGUE_FILE}"))?;
+        let catalogue =
+            Catalogue::parse(&read(CATALOGUE_FILE)?, &format!("{dir}/{CATALOGUE_FILE}"))?;
         let mut splits = BTreeMap::new();
         for split in Split::ALL {
             let name = split.file_name();
@@ -60,7 +61,11 @@ impl Benchmark {
                     &format!("{dir}/{name}"),
                     None,
                     "split",
-                    format!("says {:?}, expected {:?}", file.split.as_str(), split.as_str()),
+                    format!(
+                        "says {:?}, expected {:?}",
+                        file.split.as_str(),
+                        split.as_str()
+                    ),
                 ));
             }
             splits.insert(split, file);
@@ -88,7 +93,14 @@ pub fn parse_split(text: &str, file: &str, catalogue: &Catalogue) -> Result<Spli
     let mut table = parse_table(text, file)?;
     let tasks = match table.remove("task") {
         Some(toml::Value::Array(a)) => a,
-        Some(_) => return Err(SceneError::field(file, None, "task", "must be an array of tables")),
+        Some(_) => {
+            return Err(SceneError::field(
+                file,
+                None,
+                "task",
+                "must be an array of tables",
+            ))
+        }
         None => Vec::new(),
     };
     match table.get("schema").and_then(toml::Value::as_integer) {
@@ -113,7 +125,12 @@ pub fn parse_split(text: &str, file: &str, catalogue: &Catalogue) -> Result<Spli
             .map_or_else(|| format!("#{i} (no id)"), str::to_string);
         let task: Task = deserialize_at(value, file, Some(&name))?;
         if !ids.insert(task.id.clone()) {
-            return Err(SceneError::field(file, Some(&name), "id", "duplicate task id"));
+            return Err(SceneError::field(
+                file,
+                Some(&name),
+                "id",
+                "duplicate task id",
+            ));
         }
         check_task(&task, catalogue)
             .map_err(|(field, msg)| SceneError::field(file, Some(&task.id), field, msg))?;
@@ -152,13 +169,22 @@ fn check_task(task: &Task, cat: &Catalogue) -> Result<(), Inconsistency> {
             return fail(at("kind"), format!("{:?} is not in the catalogue", o.kind));
         };
         if t.movable {
-            return fail(at("kind"), format!("{:?} is movable, not an obstacle", o.kind));
+            return fail(
+                at("kind"),
+                format!("{:?} is movable, not an obstacle", o.kind),
+            );
         }
         if !t.rooms.contains(&task.room) {
-            return fail(at("kind"), format!("{:?} does not belong in a {}", o.kind, task.room));
+            return fail(
+                at("kind"),
+                format!("{:?} does not belong in a {}", o.kind, task.room),
+            );
         }
         if !same(&o.size, &t.size) {
-            return fail(at("size"), format!("{:?} differs from the catalogue {:?}", o.size, t.size));
+            return fail(
+                at("size"),
+                format!("{:?} differs from the catalogue {:?}", o.size, t.size),
+            );
         }
         if !finite(&o.pos) || !o.yaw.is_finite() {
             return fail(at("pos"), "not finite".into());
@@ -169,7 +195,10 @@ fn check_task(task: &Task, cat: &Catalogue) -> Result<(), Inconsistency> {
             match task.obstacle(id).and_then(|o| cat.get(&o.kind)) {
                 None => return fail(field, format!("no obstacle {id:?} to rest on")),
                 Some(t) if !t.support => {
-                    return fail(field, format!("{id:?} ({}) is not a support surface", t.name))
+                    return fail(
+                        field,
+                        format!("{id:?} ({}) is not a support surface", t.name),
+                    )
                 }
                 Some(_) => {}
             }
@@ -189,22 +218,37 @@ fn check_task(task: &Task, cat: &Catalogue) -> Result<(), Inconsistency> {
             return fail(at("kind"), format!("{:?} is not a movable object", o.kind));
         }
         if !t.rooms.contains(&task.room) {
-            return fail(at("kind"), format!("{:?} does not belong in a {}", o.kind, task.room));
+            return fail(
+                at("kind"),
+                format!("{:?} does not belong in a {}", o.kind, task.room),
+            );
         }
         if !kinds.insert(o.kind.as_str()) {
-            return fail(at("kind"), format!("two {:?}: instructions would be ambiguous", o.kind));
+            return fail(
+                at("kind"),
+                format!("two {:?}: instructions would be ambiguous", o.kind),
+            );
         }
         if !same(&o.size, &t.size) {
-            return fail(at("size"), format!("{:?} differs from the catalogue {:?}", o.size, t.size));
+            return fail(
+                at("size"),
+                format!("{:?} differs from the catalogue {:?}", o.size, t.size),
+            );
         }
         if (o.mass - t.mass).abs() > 1e-6 {
-            return fail(at("mass"), format!("{} differs from the catalogue {}", o.mass, t.mass));
+            return fail(
+                at("mass"),
+                format!("{} differs from the catalogue {}", o.mass, t.mass),
+            );
         }
         if !finite(&o.pos) || !o.yaw.is_finite() {
             return fail(at("pos"), "not finite".into());
         }
         if matches!(o.on, Support::Surface(_)) && !t.on_surface {
-            return fail(at("on"), format!("a {} does not go on a surface", t.display));
+            return fail(
+                at("on"),
+                format!("a {} does not go on a surface", t.display),
+            );
         }
         check_support(&o.on, at("on"))?;
     }
@@ -233,7 +277,10 @@ fn check_task(task: &Task, cat: &Catalogue) -> Result<(), Inconsistency> {
         check_support(&s.on, at("on"))?;
     }
     if moved.len() != task.objects.len() {
-        return fail("step".into(), "every movable object must be moved exactly once".into());
+        return fail(
+            "step".into(),
+            "every movable object must be moved exactly once".into(),
+        );
     }
     Ok(())
 }

@@ -17,7 +17,11 @@ impl Canvas {
         for _ in 0..width * height {
             pixels.extend_from_slice(&background);
         }
-        Self { width, height, pixels }
+        Self {
+            width,
+            height,
+            pixels,
+        }
     }
 
     pub fn set(&mut self, x: i64, y: i64, c: Rgb) {
@@ -77,8 +81,12 @@ impl Canvas {
     }
 
     pub fn disc(&mut self, centre: [f64; 2], radius: f64, c: Rgb) {
-        let (bx0, by0, bx1, by1) =
-            self.bounds(centre[0] - radius, centre[1] - radius, centre[0] + radius, centre[1] + radius);
+        let (bx0, by0, bx1, by1) = self.bounds(
+            centre[0] - radius,
+            centre[1] - radius,
+            centre[0] + radius,
+            centre[1] + radius,
+        );
         for y in by0..=by1 {
             for x in bx0..=bx1 {
                 let dx = x as f64 + 0.5 - centre[0];
@@ -93,7 +101,12 @@ impl Canvas {
     /// A line segment `width` pixels thick with round caps.
     pub fn line(&mut self, a: [f64; 2], b: [f64; 2], width: f64, c: Rgb) {
         let r = width / 2.0;
-        let (bx0, by0, bx1, by1) = self.bounds(a[0].min(b[0]) - r, a[1].min(b[1]) - r, a[0].max(b[0]) + r, a[1].max(b[1]) + r);
+        let (bx0, by0, bx1, by1) = self.bounds(
+            a[0].min(b[0]) - r,
+            a[1].min(b[1]) - r,
+            a[0].max(b[0]) + r,
+            a[1].max(b[1]) + r,
+        );
         let d = [b[0] - a[0], b[1] - a[1]];
         let len2 = (d[0] * d[0] + d[1] * d[1]).max(1e-12);
         for y in by0..=by1 {
@@ -119,7 +132,12 @@ impl Canvas {
                 let step = (dash - phase % dash).min(len - s);
                 let on = ((phase / dash) as i64) % 2 == 0;
                 if on {
-                    let p = |t: f64| [a[0] + (b[0] - a[0]) * t / len, a[1] + (b[1] - a[1]) * t / len];
+                    let p = |t: f64| {
+                        [
+                            a[0] + (b[0] - a[0]) * t / len,
+                            a[1] + (b[1] - a[1]) * t / len,
+                        ]
+                    };
                     self.line(p(s), p(s + step), width, c);
                 }
                 s += step;
@@ -226,7 +244,10 @@ mod tests {
     #[test]
     fn shapes_cover_the_expected_pixels() {
         let mut c = Canvas::new(20, 20, [0, 0, 0]);
-        c.fill_convex(&[[2.0, 2.0], [10.0, 2.0], [10.0, 10.0], [2.0, 10.0]], [255, 0, 0]);
+        c.fill_convex(
+            &[[2.0, 2.0], [10.0, 2.0], [10.0, 10.0], [2.0, 10.0]],
+            [255, 0, 0],
+        );
         let at = |c: &Canvas, x: u32, y: u32| {
             let i = ((y * c.width + x) * 3) as usize;
             [c.pixels[i], c.pixels[i + 1], c.pixels[i + 2]]

@@ -84,7 +84,13 @@ impl ClearanceField {
         let nx = (room_size[0] / cell).floor().max(1.0) as usize;
         let ny = (room_size[1] / cell).floor().max(1.0) as usize;
         let origin = [-room_size[0] / 2.0, -room_size[1] / 2.0];
-        let mut f = Self { origin, cell, nx, ny, dist: vec![0.0; nx * ny] };
+        let mut f = Self {
+            origin,
+            cell,
+            nx,
+            ny,
+            dist: vec![0.0; nx * ny],
+        };
         let (hx, hy) = (room_size[0] / 2.0, room_size[1] / 2.0);
         for j in 0..ny {
             for i in 0..nx {
@@ -106,7 +112,7 @@ impl ClearanceField {
         let i = ((p[0] - self.origin[0]) / self.cell).floor();
         let j = ((p[1] - self.origin[1]) / self.cell).floor();
         (i >= 0.0 && j >= 0.0 && (i as usize) < self.nx && (j as usize) < self.ny)
-            .then(|| (i as usize, j as usize))
+            .then_some((i as usize, j as usize))
     }
 
     fn block(&mut self, r: &Rect) {
@@ -126,8 +132,12 @@ impl ClearanceField {
     }
 
     fn cell_of_clamped(&self, p: [f64; 2]) -> (usize, usize) {
-        let i = ((p[0] - self.origin[0]) / self.cell).floor().clamp(0.0, (self.nx - 1) as f64);
-        let j = ((p[1] - self.origin[1]) / self.cell).floor().clamp(0.0, (self.ny - 1) as f64);
+        let i = ((p[0] - self.origin[0]) / self.cell)
+            .floor()
+            .clamp(0.0, (self.nx - 1) as f64);
+        let j = ((p[1] - self.origin[1]) / self.cell)
+            .floor()
+            .clamp(0.0, (self.ny - 1) as f64);
         (i as usize, j as usize)
     }
 
@@ -153,7 +163,10 @@ impl ClearanceField {
         let mut prev = vec![usize::MAX; self.nx * self.ny];
         let mut heap = BinaryHeap::new();
         cost[start_idx] = 0.0;
-        heap.push(Node { cost: 0.0, idx: start_idx });
+        heap.push(Node {
+            cost: 0.0,
+            idx: start_idx,
+        });
         const STEPS: [(i64, i64, f64); 8] = [
             (1, 0, 1.0),
             (-1, 0, 1.0),
@@ -186,7 +199,10 @@ impl ClearanceField {
                     continue;
                 }
                 let n = nj as usize * self.nx + ni as usize;
-                if !passable(self.centre(ni as usize, nj as usize), f64::from(self.dist[n])) {
+                if !passable(
+                    self.centre(ni as usize, nj as usize),
+                    f64::from(self.dist[n]),
+                ) {
                     continue;
                 }
                 let nc = c + w * self.cell;
@@ -226,7 +242,10 @@ struct Node {
 impl Eq for Node {}
 impl Ord for Node {
     fn cmp(&self, other: &Self) -> Ordering {
-        other.cost.total_cmp(&self.cost).then(other.idx.cmp(&self.idx))
+        other
+            .cost
+            .total_cmp(&self.cost)
+            .then(other.idx.cmp(&self.idx))
     }
 }
 impl PartialOrd for Node {
@@ -257,7 +276,11 @@ pub fn plan_task(task: &Task, c: &Clearance) -> Result<Vec<Leg>, RouteError> {
         .iter()
         .map(|o| footprint(o.pos, o.yaw, o.size))
         .collect();
-    let on_floor: Vec<bool> = task.objects.iter().map(|o| o.on == Support::Floor).collect();
+    let on_floor: Vec<bool> = task
+        .objects
+        .iter()
+        .map(|o| o.on == Support::Floor)
+        .collect();
     let mut on_floor_now = on_floor.clone();
     let mut here = task.start.pos;
     let mut legs = Vec::new();
@@ -272,7 +295,12 @@ pub fn plan_task(task: &Task, c: &Clearance) -> Result<Vec<Leg>, RouteError> {
         };
         let obj = &task.objects[obj_idx];
         let carry = c.carry(obj.size);
-        let err = |kind, reason| RouteError { step: k, object: obj.id.clone(), kind, reason };
+        let err = |kind, reason| RouteError {
+            step: k,
+            object: obj.id.clone(),
+            kind,
+            reason,
+        };
 
         let mut walk_field = fixed.clone();
         for (j, r) in at.iter().enumerate() {
@@ -282,10 +310,18 @@ pub fn plan_task(task: &Task, c: &Clearance) -> Result<Vec<Leg>, RouteError> {
         }
         let pick = at[obj_idx];
         let walk = walk_field
-            .plan(here, |_, d| d >= c.walk, |p, d| d >= c.walk && pick.distance(p) <= c.reach)
+            .plan(
+                here,
+                |_, d| d >= c.walk,
+                |p, d| d >= c.walk && pick.distance(p) <= c.reach,
+            )
             .map_err(|r| err(LegKind::Walk, r))?;
         let pick_spot = *walk.last().unwrap_or(&here);
-        legs.push(Leg { step: k, kind: LegKind::Walk, path: walk });
+        legs.push(Leg {
+            step: k,
+            kind: LegKind::Walk,
+            path: walk,
+        });
 
         let mut carry_field = fixed.clone();
         for (j, r) in at.iter().enumerate() {
@@ -305,7 +341,11 @@ pub fn plan_task(task: &Task, c: &Clearance) -> Result<Vec<Leg>, RouteError> {
             )
             .map_err(|r| err(LegKind::Carry, r))?;
         here = *path.last().unwrap_or(&pick_spot);
-        legs.push(Leg { step: k, kind: LegKind::Carry, path });
+        legs.push(Leg {
+            step: k,
+            kind: LegKind::Carry,
+            path,
+        });
         at[obj_idx] = goal;
         on_floor_now[obj_idx] = step.on == Support::Floor;
     }

@@ -24,7 +24,11 @@ impl Summary {
         let mut v = values.to_vec();
         v.sort_by(f64::total_cmp);
         let n = v.len();
-        let median = if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) };
+        let median = if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        };
         let round = |x: f64| (x * 1000.0).round() / 1000.0;
         Some(Summary {
             min: round(v[0]),
@@ -81,7 +85,9 @@ pub struct Stats {
 }
 
 fn words(s: &str) -> impl Iterator<Item = String> + '_ {
-    s.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).map(str::to_lowercase)
+    s.split(|c: char| !c.is_alphanumeric())
+        .filter(|w| !w.is_empty())
+        .map(str::to_lowercase)
 }
 
 pub fn compute(b: &Benchmark) -> Stats {
@@ -91,7 +97,8 @@ pub fn compute(b: &Benchmark) -> Stats {
         let tasks = b.tasks(split);
         let mut by_room = BTreeMap::new();
         let mut by_objects = BTreeMap::new();
-        let (mut obst, mut init_r, mut goal_r, mut carry, mut shift) = (vec![], vec![], vec![], vec![], vec![]);
+        let (mut obst, mut init_r, mut goal_r, mut carry, mut shift) =
+            (vec![], vec![], vec![], vec![], vec![]);
         let (mut start_surf, mut goal_surf, mut goal_floor) = (0, 0, 0);
         let mut choices = HashSet::new();
         let mut instructions = HashSet::new();
@@ -141,7 +148,11 @@ pub fn compute(b: &Benchmark) -> Stats {
     let vocab = |split: Split| -> BTreeSet<String> {
         b.tasks(split)
             .iter()
-            .flat_map(|t| t.sequence.iter().flat_map(|s| words(&s.instruction).collect::<Vec<_>>()))
+            .flat_map(|t| {
+                t.sequence
+                    .iter()
+                    .flat_map(|s| words(&s.instruction).collect::<Vec<_>>())
+            })
             .collect()
     };
     let (train_v, unseen_v) = (vocab(Split::Train), vocab(Split::Unseen));
@@ -162,7 +173,12 @@ pub fn compute(b: &Benchmark) -> Stats {
         movable_object_types: cat.movable().count(),
         static_object_types: cat.statics().count(),
         support_object_types: cat.statics().filter(|t| t.support).count(),
-        obstacles_per_scene: Summary::of(&all_obstacles).unwrap_or(Summary { min: 0.0, median: 0.0, max: 0.0, mean: 0.0 }),
+        obstacles_per_scene: Summary::of(&all_obstacles).unwrap_or(Summary {
+            min: 0.0,
+            median: 0.0,
+            max: 0.0,
+            mean: 0.0,
+        }),
         instructions: InstructionOverlap {
             train_vocabulary: train_v.len(),
             unseen_vocabulary: unseen_v.len(),
@@ -179,14 +195,22 @@ pub fn compute(b: &Benchmark) -> Stats {
                 .count(),
             unseen_only_words: unseen_v.difference(&train_v).cloned().collect(),
         },
-        unseen_object_choices_in_train: unseen.iter().filter(|t| train_choices.contains(&object_choice(t))).count(),
-        unseen_layouts_in_train: unseen.iter().filter(|t| train_layouts.contains(&layout_signature(t))).count(),
+        unseen_object_choices_in_train: unseen
+            .iter()
+            .filter(|t| train_choices.contains(&object_choice(t)))
+            .count(),
+        unseen_layouts_in_train: unseen
+            .iter()
+            .filter(|t| train_layouts.contains(&layout_signature(t)))
+            .count(),
     }
 }
 
 fn fmt_summary(s: &Option<Summary>) -> String {
-    s.as_ref()
-        .map_or_else(|| "-".into(), |s| format!("{} / {} / {}", s.min, s.median, s.max))
+    s.as_ref().map_or_else(
+        || "-".into(),
+        |s| format!("{} / {} / {}", s.min, s.median, s.max),
+    )
 }
 
 /// The human-readable report.
@@ -194,7 +218,11 @@ pub fn to_text(s: &Stats) -> String {
     let mut out = String::new();
     out += &format!(
         "object types: {} ({} movable targets, {} static, {} support surfaces); room types: {}\n",
-        s.object_types, s.movable_object_types, s.static_object_types, s.support_object_types, s.room_types
+        s.object_types,
+        s.movable_object_types,
+        s.static_object_types,
+        s.support_object_types,
+        s.room_types
     );
     out += &format!(
         "obstacles per scene (all splits) min/median/max: {} / {} / {}\n\n",
@@ -202,15 +230,38 @@ pub fn to_text(s: &Stats) -> String {
     );
     for (name, sp) in &s.splits {
         out += &format!("[{name}] {} tasks\n", sp.tasks);
-        let rooms: Vec<String> = sp.tasks_by_room.iter().map(|(r, n)| format!("{r} {n}")).collect();
+        let rooms: Vec<String> = sp
+            .tasks_by_room
+            .iter()
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect();
         out += &format!("  per room type: {}\n", rooms.join(", "));
-        let objs: Vec<String> = sp.tasks_by_objects.iter().map(|(k, n)| format!("{k} objects: {n}")).collect();
+        let objs: Vec<String> = sp
+            .tasks_by_objects
+            .iter()
+            .map(|(k, n)| format!("{k} objects: {n}"))
+            .collect();
         out += &format!("  tasks by object count: {}\n", objs.join(", "));
-        out += &format!("  obstacles per scene min/median/max: {}\n", fmt_summary(&sp.obstacles_per_scene));
-        out += &format!("  initial radius (m) min/median/max:  {}\n", fmt_summary(&sp.initial_radius_m));
-        out += &format!("  goal radius (m) min/median/max:     {}\n", fmt_summary(&sp.goal_radius_m));
-        out += &format!("  carry distance (m) min/median/max:  {}\n", fmt_summary(&sp.carry_distance_m));
-        out += &format!("  centroid shift (m) min/median/max:  {}\n", fmt_summary(&sp.centroid_shift_m));
+        out += &format!(
+            "  obstacles per scene min/median/max: {}\n",
+            fmt_summary(&sp.obstacles_per_scene)
+        );
+        out += &format!(
+            "  initial radius (m) min/median/max:  {}\n",
+            fmt_summary(&sp.initial_radius_m)
+        );
+        out += &format!(
+            "  goal radius (m) min/median/max:     {}\n",
+            fmt_summary(&sp.goal_radius_m)
+        );
+        out += &format!(
+            "  carry distance (m) min/median/max:  {}\n",
+            fmt_summary(&sp.carry_distance_m)
+        );
+        out += &format!(
+            "  centroid shift (m) min/median/max:  {}\n",
+            fmt_summary(&sp.centroid_shift_m)
+        );
         out += &format!(
             "  objects starting on surfaces: {}; goals on surfaces/floor: {}/{}; distinct object choices: {}; distinct instructions: {}\n\n",
             sp.objects_starting_on_surfaces, sp.goals_on_surfaces, sp.goals_on_floor, sp.distinct_object_choices, sp.distinct_instructions

@@ -4,11 +4,10 @@ use crate::error::SceneError;
 use serde::de::DeserializeOwned;
 
 pub(crate) fn parse_table(text: &str, file: &str) -> Result<toml::Table, SceneError> {
-    text.parse::<toml::Table>()
-        .map_err(|e| SceneError::Syntax {
-            file: file.to_string(),
-            message: e.to_string().trim_end().to_string(),
-        })
+    text.parse::<toml::Table>().map_err(|e| SceneError::Syntax {
+        file: file.to_string(),
+        message: e.to_string().trim_end().to_string(),
+    })
 }
 
 /// Deserialises `value`, reporting the failing field's path (e.g. `object[1].mass`).
@@ -20,6 +19,9 @@ pub(crate) fn deserialize_at<T: DeserializeOwned>(
     serde_path_to_error::deserialize(value).map_err(|e| {
         let field = e.path().to_string();
         let field = if field == "." { "(root)".into() } else { field };
-        SceneError::field(file, task, field, e.into_inner().to_string())
+        // toml appends its own "in `a.b`" line, which the indexed path above already says.
+        let message = e.into_inner().to_string();
+        let message = message.lines().next().unwrap_or_default().to_string();
+        SceneError::field(file, task, field, message)
     })
 }

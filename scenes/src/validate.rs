@@ -54,15 +54,26 @@ pub fn validate_task(task: &Task, split: Split, cat: &Catalogue, c: &Clearance) 
     }
     let n_obs = task.obstacles.len();
     let [lo, hi] = spec.obstacles;
-    if n_obs < OBSTACLES_PER_SCENE[0].max(lo as usize) || n_obs > OBSTACLES_PER_SCENE[1].min(hi as usize) {
-        p.push(format!("{n_obs} obstacles, a {} has {lo}..={hi}", task.room));
+    if n_obs < OBSTACLES_PER_SCENE[0].max(lo as usize)
+        || n_obs > OBSTACLES_PER_SCENE[1].min(hi as usize)
+    {
+        p.push(format!(
+            "{n_obs} obstacles, a {} has {lo}..={hi}",
+            task.room
+        ));
     }
     let [min_obj, max_obj] = objects_per_task(split);
     if task.objects.len() < min_obj || task.objects.len() > max_obj {
-        p.push(format!("{} objects, the {split} split has {min_obj}..={max_obj}", task.objects.len()));
+        p.push(format!(
+            "{} objects, the {split} split has {min_obj}..={max_obj}",
+            task.objects.len()
+        ));
     }
     if dist(task.centroid, [0.0, 0.0]) > MAX_CENTROID_SHIFT + 1e-6 {
-        p.push(format!("centroid {:?} shifted more than {MAX_CENTROID_SHIFT} m", task.centroid));
+        p.push(format!(
+            "centroid {:?} shifted more than {MAX_CENTROID_SHIFT} m",
+            task.centroid
+        ));
     }
     let room = room_rect(task.room_size);
     let obstacles: Vec<Rect> = task.obstacles.iter().map(obstacle_rect).collect();
@@ -73,43 +84,61 @@ pub fn validate_task(task: &Task, split: Split, cat: &Catalogue, c: &Clearance) 
         }
         for (j, s) in obstacles.iter().enumerate().skip(i + 1) {
             if r.overlaps(s, 0.0) {
-                p.push(format!("obstacles {id} and {} overlap", task.obstacles[j].id));
+                p.push(format!(
+                    "obstacles {id} and {} overlap",
+                    task.obstacles[j].id
+                ));
             }
         }
     }
     // Resting checks shared by initial poses and goals: returns the problem, if any.
-    let rests = |what: &str, pos: [f64; 3], yaw: f64, size: [f64; 3], on: &Support| -> Option<String> {
-        let fp = footprint(pos, yaw, size);
-        match on {
-            Support::Floor => {
-                if (pos[2] - size[2] / 2.0).abs() > Z_TOL {
-                    return Some(format!("{what} is on the floor but its centre is at z={}", pos[2]));
+    let rests =
+        |what: &str, pos: [f64; 3], yaw: f64, size: [f64; 3], on: &Support| -> Option<String> {
+            let fp = footprint(pos, yaw, size);
+            match on {
+                Support::Floor => {
+                    if (pos[2] - size[2] / 2.0).abs() > Z_TOL {
+                        return Some(format!(
+                            "{what} is on the floor but its centre is at z={}",
+                            pos[2]
+                        ));
+                    }
+                    if !room.contains_rect(&fp, 0.0) {
+                        return Some(format!("{what} sticks out of the room"));
+                    }
+                    if let Some(k) = obstacles.iter().position(|o| o.overlaps(&fp, 0.0)) {
+                        return Some(format!("{what} overlaps obstacle {}", task.obstacles[k].id));
+                    }
                 }
-                if !room.contains_rect(&fp, 0.0) {
-                    return Some(format!("{what} sticks out of the room"));
-                }
-                if let Some(k) = obstacles.iter().position(|o| o.overlaps(&fp, 0.0)) {
-                    return Some(format!("{what} overlaps obstacle {}", task.obstacles[k].id));
+                Support::Surface(id) => {
+                    let o = task.obstacle(id)?; // the loader guarantees the reference
+                    let top = obstacle_rect(o);
+                    if !top.contains_rect(&fp, SURFACE_MARGIN) {
+                        return Some(format!("{what} does not fit on {id} ({})", o.kind));
+                    }
+                    if (pos[2] - (o.size[2] + size[2] / 2.0)).abs() > Z_TOL {
+                        return Some(format!(
+                            "{what} is not resting on top of {id} (z={})",
+                            pos[2]
+                        ));
+                    }
                 }
             }
-            Support::Surface(id) => {
-                let o = task.obstacle(id)?; // the loader guarantees the reference
-                let top = obstacle_rect(o);
-                if !top.contains_rect(&fp, SURFACE_MARGIN) {
-                    return Some(format!("{what} does not fit on {id} ({})", o.kind));
-                }
-                if (pos[2] - (o.size[2] + size[2] / 2.0)).abs() > Z_TOL {
-                    return Some(format!("{what} is not resting on top of {id} (z={})", pos[2]));
-                }
+            if dist([pos[0], pos[1]], task.centroid) > MAX_RADIUS + 1e-6 {
+                return Some(format!(
+                    "{what} is more than {MAX_RADIUS} m from the centroid"
+                ));
             }
-        }
-        if dist([pos[0], pos[1]], task.centroid) > MAX_RADIUS + 1e-6 {
-            return Some(format!("{what} is more than {MAX_RADIUS} m from the centroid"));
-        }
-        None
-    };
+            None
+        };
     for o in &task.objects {
-        p.extend(rests(&format!("object {}", o.id), o.pos, o.yaw, o.size, &o.on));
+        p.extend(rests(
+            &format!("object {}", o.id),
+            o.pos,
+            o.yaw,
+            o.size,
+            &o.on,
+        ));
     }
     for (i, a) in task.objects.iter().enumerate() {
         for b in &task.objects[i + 1..] {
@@ -124,14 +153,21 @@ pub fn validate_task(task: &Task, split: Split, cat: &Catalogue, c: &Clearance) 
     // poses, objects already moved are at their goals.
     let mut placed: Vec<(String, Rect, Support)> = Vec::new();
     for (k, s) in task.sequence.iter().enumerate() {
-        let Some(obj) = task.object(&s.object) else { continue };
+        let Some(obj) = task.object(&s.object) else {
+            continue;
+        };
         let what = format!("goal of step {k} ({})", obj.id);
         p.extend(rests(&what, s.goal, s.goal_yaw, obj.size, &s.on));
         let g = footprint(s.goal, s.goal_yaw, obj.size);
-        let waiting = task.sequence[k + 1..].iter().filter_map(|w| task.object(&w.object));
+        let waiting = task.sequence[k + 1..]
+            .iter()
+            .filter_map(|w| task.object(&w.object));
         for w in waiting {
             if w.on == s.on && footprint(w.pos, w.yaw, w.size).overlaps(&g, 0.0) {
-                p.push(format!("{what} is occupied by object {} waiting there", w.id));
+                p.push(format!(
+                    "{what} is occupied by object {} waiting there",
+                    w.id
+                ));
             }
         }
         for (id, r, on) in &placed {
@@ -140,9 +176,17 @@ pub fn validate_task(task: &Task, split: Split, cat: &Catalogue, c: &Clearance) 
             }
         }
         placed.push((obj.id.clone(), g, s.on.clone()));
-        let display = cat.get(&obj.kind).map_or(obj.kind.as_str(), |t| t.display.as_str());
-        if !s.instruction.to_lowercase().contains(&display.to_lowercase()) {
-            p.push(format!("instruction of step {k} does not name the {display}"));
+        let display = cat
+            .get(&obj.kind)
+            .map_or(obj.kind.as_str(), |t| t.display.as_str());
+        if !s
+            .instruction
+            .to_lowercase()
+            .contains(&display.to_lowercase())
+        {
+            p.push(format!(
+                "instruction of step {k} does not name the {display}"
+            ));
         }
     }
     if p.is_empty() {
@@ -175,7 +219,10 @@ pub fn validate_cross_split(b: &Benchmark) -> Vec<Problem> {
     let mut ids = HashSet::new();
     for (split, t) in b.all_tasks() {
         if !ids.insert(t.id.as_str()) {
-            p.push(Problem { task: t.id.clone(), reason: format!("id repeated (in {split})") });
+            p.push(Problem {
+                task: t.id.clone(),
+                reason: format!("id repeated (in {split})"),
+            });
         }
     }
     let train = b.tasks(Split::Train);
@@ -186,16 +233,27 @@ pub fn validate_cross_split(b: &Benchmark) -> Vec<Problem> {
         .flat_map(|t| t.sequence.iter().map(|s| s.instruction.as_str()))
         .collect();
     for t in b.tasks(Split::Unseen) {
-        let mut bad = |reason: String| p.push(Problem { task: t.id.clone(), reason });
+        let mut bad = |reason: String| {
+            p.push(Problem {
+                task: t.id.clone(),
+                reason,
+            })
+        };
         if layouts.contains(&layout_signature(t)) {
             bad("its layout (room type and furniture) also occurs in train".into());
         }
         if choices.contains(&object_choice(t)) {
-            bad(format!("its object choice {:?} also occurs in train", object_choice(t)));
+            bad(format!(
+                "its object choice {:?} also occurs in train",
+                object_choice(t)
+            ));
         }
         for s in &t.sequence {
             if instructions.contains(s.instruction.as_str()) {
-                bad(format!("instruction {:?} also occurs in train", s.instruction));
+                bad(format!(
+                    "instruction {:?} also occurs in train",
+                    s.instruction
+                ));
             }
         }
     }
@@ -210,7 +268,10 @@ pub fn validate_benchmark(b: &Benchmark, only: Option<Split>, c: &Clearance) -> 
             continue;
         }
         for reason in validate_task(task, split, &b.catalogue, c) {
-            problems.push(Problem { task: task.id.clone(), reason });
+            problems.push(Problem {
+                task: task.id.clone(),
+                reason,
+            });
         }
     }
     problems.extend(validate_cross_split(b));
