@@ -1,6 +1,7 @@
 //! `lhm`: the project's command line. Subcommands are thin: parsing and printing here, the work in
 //! the library crates.
 
+mod bench_cmd;
 mod scenes_cmd;
 
 use clap::{Parser, Subcommand};
@@ -21,6 +22,8 @@ struct Cli {
 enum Command {
     /// The benchmark: generate, validate, summarise and draw its tasks.
     Scenes(scenes_cmd::ScenesArgs),
+    /// Throughput benchmarks (results go in BENCHMARKS.md).
+    Bench(bench_cmd::BenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -33,6 +36,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Scenes(args) => scenes_cmd::run(args),
+        Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
     };
     match result {
         Ok(code) => code,

@@ -1,0 +1,13 @@
+//! The physics environment on rapier: the character from MJCF, rooms from the benchmark, control,
+//! observations, rewards and reset-free cycles.
+
+pub mod batch;
+pub mod bench;
+pub mod character;
+pub mod mjcf;
+pub mod room;
+pub mod world;
+
+pub use character::Character;
+pub use mjcf::CharacterModel;
+pub use world::{SimConfig, World};
