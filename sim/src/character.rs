@@ -2,8 +2,8 @@
 //! stable under PD control where impulse joints gained energy), PD servos as force-based joint
 //! motors with torque limits, CCD off (on multibody links it pulled links off their joints).
 //!
-//! Actions are PD targets: target = offset + scale · a per DoF, clamped to the joint's range; the
-//! offset is the neutral pose (0 clamped into the range), the scale reaches the farther range end. A 3-DoF joint's target is the rotation Rx·Ry·Rz of its three targets; rapier's
+//! Actions are PD targets: target = offset + scale · a per DoF, clamped to the joint's range (see
+//! `spawn` for the offsets and scales). A 3-DoF joint's target is the rotation Rx·Ry·Rz of its three targets; rapier's
 //! own 3-DoF coordinates are integrated approximations, so the servo is driven by the exact error
 //! rotation (target · current⁻¹, from the joint's rotation) added to those coordinates.
 
@@ -121,18 +121,22 @@ impl Character {
             joints.push(joint);
             handles.push(h);
         }
-        // Zero action holds the neutral pose (0, clamped into range); ±1 reach the range ends.
-        let action_offset: Vec<f32> = model
-            .dofs
-            .iter()
-            .map(|d| 0f64.clamp(d.range[0], d.range[1]) as f32)
-            .collect();
-        let action_scale = model
-            .dofs
-            .iter()
-            .zip(&action_offset)
-            .map(|(d, o)| (d.range[1] - f64::from(*o)).max(f64::from(*o) - d.range[0]) as f32)
-            .collect();
+        // 3-DoF joints: zero action holds the neutral pose, ±1 reach the farther range end.
+        // Hinges (elbows, knees) have their neutral pose at a range end, where a neutral offset
+        // would waste half the action range; they map [-1, 1] onto their range, as IsaacGym's AMP
+        // humanoid does.
+        let mut action_offset = Vec::with_capacity(model.dofs.len());
+        let mut action_scale = Vec::with_capacity(model.dofs.len());
+        for d in &model.dofs {
+            let hinge = matches!(model.bodies[d.body].joint, JointKind::Hinge { .. });
+            let offset = if hinge {
+                0.5 * (d.range[0] + d.range[1])
+            } else {
+                0f64.clamp(d.range[0], d.range[1])
+            };
+            action_offset.push(offset as f32);
+            action_scale.push((d.range[1] - offset).max(offset - d.range[0]) as f32);
+        }
         Self {
             model: model.clone(),
             bodies: handles,

@@ -5,7 +5,9 @@ pub mod batch;
 pub mod bench;
 pub mod character;
 pub mod mjcf;
+pub mod obs;
 pub mod room;
+pub mod task;
 pub mod world;
 
 pub use character::Character;

@@ -151,9 +151,11 @@ impl World {
             },
         );
         let steps = config.pipeline_steps_per_control.max(1);
-        let mut params = IntegrationParameters::default();
-        params.dt = 1.0 / (config.control_hz * steps as f32);
-        params.num_solver_iterations = (config.physics_steps_per_control() / steps).max(1);
+        let params = IntegrationParameters {
+            dt: 1.0 / (config.control_hz * steps as f32),
+            num_solver_iterations: (config.physics_steps_per_control() / steps).max(1),
+            ..IntegrationParameters::default()
+        };
         Self {
             config,
             params,
@@ -261,5 +263,24 @@ impl World {
             .objects
             .get(i)
             .map(|h| *self.state.bodies[*h].position())
+    }
+}
+
+impl World {
+    /// Every character body's state, in model order.
+    pub fn body_states(&self) -> Vec<crate::obs::BodyState> {
+        self.character
+            .bodies
+            .iter()
+            .map(|h| {
+                let b = &self.state.bodies[*h];
+                crate::obs::BodyState {
+                    pos: b.position().translation,
+                    rot: b.position().rotation,
+                    linvel: b.linvel(),
+                    angvel: b.angvel(),
+                }
+            })
+            .collect()
     }
 }

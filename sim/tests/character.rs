@@ -47,8 +47,14 @@ fn zero_action_stands_for_a_moment_then_falls_without_flying() {
         }
         heights.push(w.root_height());
     }
-    // Half a second after spawn it is still upright (the PD servos hold the spawn pose) ...
-    assert!(heights[14] > 0.8, "root at 0.5 s: {}", heights[14]);
+    // A moment after spawn it is still upright; zero action bends the knees to mid-range, so it
+    // sinks into a crouch it holds for a while (measured: 0.71 m at 0.5 s) ...
+    assert!(heights[2] > 0.8, "root at 0.1 s: {}", heights[2]);
+    assert!(
+        heights[10..20].iter().all(|h| *h > 0.6),
+        "crouch held: {:?}",
+        &heights[10..20]
+    );
     // ... it never rises above where it started or moves absurdly fast ...
     assert!(
         max_root < spawn + 0.02,
@@ -108,27 +114,30 @@ fn batch_results_do_not_depend_on_thread_count() {
 }
 
 #[test]
-fn an_unstable_configuration_is_caught_by_the_guard_not_a_panic() {
-    // One 1/30 s pipeline step with 4 substeps explodes when the character falls (measured); the
-    // guard must flag it and stop stepping instead of letting rapier panic on NaN.
+fn nan_and_explosions_trip_the_guard_instead_of_a_panic() {
     let model = CharacterModel::amp_humanoid();
-    let mut w = World::new(
-        &model,
-        SimConfig {
-            pipeline_steps_per_control: 1,
-            ..SimConfig::default()
-        },
-    );
     let zero = vec![0.0; model.dofs.len()];
-    let mut tripped_at = None;
-    for i in 0..300 {
-        if !w.step(&zero) {
-            tripped_at = Some(i);
-            break;
-        }
+    for (what, value) in [("NaN", f32::NAN), ("explosion", 1.0e4)] {
+        let mut w = World::new(&model, SimConfig::default());
+        assert!(w.step(&zero));
+        // Corrupt the root's generalized velocity the way a diverging solve would.
+        let root_joint = w
+            .state
+            .multibody_joints
+            .rigid_body_link(w.character.root())
+            .copied()
+            .expect("root link");
+        let mb = w
+            .state
+            .multibody_joints
+            .get_multibody_mut(root_joint.multibody)
+            .expect("multibody");
+        mb.generalized_velocity_mut()[2] = value;
+        assert!(!w.step(&zero), "{what}: the guard trips");
+        assert!(w.physics_invalid, "{what}: flagged");
+        assert!(
+            !w.step(&zero),
+            "{what}: an invalid world is not stepped again"
+        );
     }
-    let at = tripped_at.expect("this configuration is known to blow up within 10 s");
-    assert!(w.physics_invalid);
-    assert!(!w.step(&zero), "an invalid world is not stepped again");
-    assert!(at > 10, "it stood first (tripped at {at})");
 }

@@ -1,0 +1,256 @@
+//! Reward terms as small pure functions over plain state, each in [0, 1] unless it is a penalty.
+//! The task reward of a step is their weighted sum ([`RewardWeights`]); the style reward comes
+//! from the AMP discriminator elsewhere.
+
+use rapier3d::math::Vector;
+use serde::{Deserialize, Serialize};
+
+/// Horizontal part of a vector.
+fn flat(v: Vector) -> Vector {
+    Vector::new(v.x, v.y, 0.0)
+}
+
+/// Walking to the object: 1 once within `near` metres (horizontally); before that, half for
+/// closeness and half for speed toward it, up to `target_speed`.
+pub fn locomotion(
+    root_pos: Vector,
+    root_vel: Vector,
+    object_pos: Vector,
+    target_speed: f32,
+    near: f32,
+) -> f32 {
+    let to = flat(object_pos - root_pos);
+    let d = to.length();
+    if d < near {
+        return 1.0;
+    }
+    let dir = to / d;
+    let speed_toward = flat(root_vel).dot(dir);
+    let speed_gap = (target_speed - speed_toward).max(0.0);
+    0.5 * (-0.5 * d * d).exp() + 0.5 * (-2.0 * speed_gap * speed_gap).exp()
+}
+
+/// Distance from `p` to an axis-aligned box (object frame) of half extents `half` (0 inside).
+pub fn distance_to_box(p_local: Vector, half: Vector) -> f32 {
+    let q = p_local.abs() - half;
+    q.max(Vector::ZERO).length()
+}
+
+/// Both hands on the object: exp(-k · mean squared hand-to-surface distance). Hand positions are
+/// in the object's frame.
+pub fn hands_to_object(left_local: Vector, right_local: Vector, half: Vector, k: f32) -> f32 {
+    let dl = distance_to_box(left_local, half);
+    let dr = distance_to_box(right_local, half);
+    (-k * 0.5 * (dl * dl + dr * dr)).exp()
+}
+
+/// Lifting: fraction of `target_lift` metres the object has risen above where it started, in
+/// [0, 1].
+pub fn lift(object_z: f32, start_z: f32, target_lift: f32) -> f32 {
+    ((object_z - start_z) / target_lift).clamp(0.0, 1.0)
+}
+
+/// Carrying: the object's horizontal speed toward its goal, up to `target_speed`; 1 once within
+/// `near` of the goal.
+pub fn carry(
+    object_pos: Vector,
+    object_vel: Vector,
+    goal: Vector,
+    target_speed: f32,
+    near: f32,
+) -> f32 {
+    let to = flat(goal - object_pos);
+    let d = to.length();
+    if d < near {
+        return 1.0;
+    }
+    let gap = (target_speed - flat(object_vel).dot(to / d)).max(0.0);
+    (-2.0 * gap * gap).exp()
+}
+
+/// Placing: exp(-k · |object - goal|²) in 3-D.
+pub fn place(object_pos: Vector, goal: Vector, k: f32) -> f32 {
+    (-k * (object_pos - goal).length_squared()).exp()
+}
+
+/// Mechanical power, as a penalty: -Σ |τ_i · q̇_i| (W).
+pub fn power_penalty(torques: &[f32], joint_velocities: &[f32]) -> f32 {
+    -torques
+        .iter()
+        .zip(joint_velocities)
+        .map(|(t, v)| (t * v).abs())
+        .sum::<f32>()
+}
+
+/// Parameters of the release-and-retreat reward (paper, Algorithm 1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ReleaseRetreat {
+    /// Growth rate of the distance terms, 1/m.
+    pub alpha: f32,
+    /// Root-to-object distance beyond which the root term is capped at 1, m.
+    pub delta_r: f32,
+    /// Hand-to-object distance beyond which the hand term is capped at 1, m.
+    pub delta_h: f32,
+    /// The reward stays 0 until the object is within this distance of its goal, m.
+    pub tau_object2goal: f32,
+    /// Weight of the root term (1 - beta: hand term).
+    pub beta: f32,
+}
+
+impl Default for ReleaseRetreat {
+    fn default() -> Self {
+        Self {
+            alpha: 5.0,
+            delta_r: 0.8,
+            delta_h: 0.5,
+            tau_object2goal: 0.2,
+            beta: 0.5,
+        }
+    }
+}
+
+/// Release-and-retreat, line for line as Algorithm 1 of the paper.
+pub fn release_and_retreat(
+    p: &ReleaseRetreat,
+    d_root2object: f32,
+    d_hand2object_left: f32,
+    d_hand2object_right: f32,
+    d_object2goal: f32,
+) -> f32 {
+    let d_hand2object = d_hand2object_left.min(d_hand2object_right); // line 1
+    let mut r_root2object = 1.0 - (-p.alpha * d_root2object).exp(); // line 2
+    let mut r_hand2object = 1.0 - (-p.alpha * d_hand2object).exp(); // line 3
+    if d_root2object > p.delta_r {
+        r_root2object = 1.0; // lines 4-6
+    }
+    if d_hand2object > p.delta_h {
+        r_hand2object = 1.0; // lines 7-9
+    }
+    if d_object2goal >= p.tau_object2goal {
+        r_root2object = 0.0; // lines 10-13
+        r_hand2object = 0.0;
+    }
+    p.beta * r_root2object + (1.0 - p.beta) * r_hand2object // line 14
+}
+
+/// Weights of the task reward terms (the power term is a penalty: its weight is positive and its
+/// value negative).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct RewardWeights {
+    pub locomotion: f32,
+    pub hands: f32,
+    pub lift: f32,
+    pub carry: f32,
+    pub place: f32,
+    pub power: f32,
+    /// 0 during pretraining, > 0 for release-and-retreat fine-tuning.
+    pub release_retreat: f32,
+}
+
+impl Default for RewardWeights {
+    fn default() -> Self {
+        Self {
+            locomotion: 0.2,
+            hands: 0.2,
+            lift: 0.1,
+            carry: 0.2,
+            place: 0.3,
+            power: 2e-5,
+            release_retreat: 0.0,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn v(x: f32, y: f32, z: f32) -> Vector {
+        Vector::new(x, y, z)
+    }
+
+    #[test]
+    fn locomotion_rewards_closing_in_fast() {
+        let obj = v(3.0, 0.0, 0.4);
+        let standing = locomotion(v(0.0, 0.0, 0.9), Vector::ZERO, obj, 1.5, 0.5);
+        let walking_to = locomotion(v(0.0, 0.0, 0.9), v(1.5, 0.0, 0.0), obj, 1.5, 0.5);
+        let walking_away = locomotion(v(0.0, 0.0, 0.9), v(-1.5, 0.0, 0.0), obj, 1.5, 0.5);
+        assert!(walking_to > standing && standing > walking_away);
+        assert!((walking_to - (0.5 * (-4.5f32).exp() + 0.5)).abs() < 1e-6);
+        assert_eq!(
+            locomotion(v(2.7, 0.1, 0.9), Vector::ZERO, obj, 1.5, 0.5),
+            1.0
+        );
+        // Height does not count.
+        assert_eq!(
+            locomotion(v(0.0, 0.0, 5.0), Vector::ZERO, obj, 1.5, 0.5),
+            standing
+        );
+    }
+
+    #[test]
+    fn hands_reward_peaks_on_the_surface() {
+        let half = v(0.2, 0.15, 0.1);
+        assert_eq!(distance_to_box(v(0.0, 0.0, 0.0), half), 0.0);
+        assert!((distance_to_box(v(0.5, 0.0, 0.0), half) - 0.3).abs() < 1e-6);
+        let on = hands_to_object(v(0.2, 0.0, 0.0), v(-0.2, 0.0, 0.0), half, 20.0);
+        let off = hands_to_object(v(0.6, 0.0, 0.0), v(-0.2, 0.0, 0.0), half, 20.0);
+        assert_eq!(on, 1.0);
+        assert!((off - (-20.0f32 * 0.5 * 0.16).exp()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn lift_carry_place_on_hand_built_states() {
+        assert_eq!(lift(0.2, 0.2, 0.3), 0.0);
+        assert!((lift(0.35, 0.2, 0.3) - 0.5).abs() < 1e-6);
+        assert_eq!(lift(1.0, 0.2, 0.3), 1.0);
+        assert_eq!(
+            lift(0.1, 0.2, 0.3),
+            0.0,
+            "pushed into the floor is not lifting"
+        );
+        let goal = v(2.0, 0.0, 0.2);
+        assert_eq!(
+            carry(v(0.0, 0.0, 0.5), v(1.0, 0.0, 0.0), goal, 1.0, 0.3),
+            1.0
+        );
+        assert!(
+            (carry(v(0.0, 0.0, 0.5), Vector::ZERO, goal, 1.0, 0.3) - (-2.0f32).exp()).abs() < 1e-6
+        );
+        assert_eq!(carry(v(1.8, 0.0, 0.5), Vector::ZERO, goal, 1.0, 0.3), 1.0);
+        assert_eq!(place(goal, goal, 10.0), 1.0);
+        assert!((place(v(2.0, 0.3, 0.2), goal, 10.0) - (-0.9f32).exp()).abs() < 1e-6);
+        assert_eq!(power_penalty(&[10.0, -5.0], &[2.0, 1.0]), -25.0);
+    }
+
+    #[test]
+    fn release_and_retreat_follows_algorithm_1() {
+        let p = ReleaseRetreat {
+            alpha: 2.0,
+            delta_r: 1.0,
+            delta_h: 0.6,
+            tau_object2goal: 0.2,
+            beta: 0.7,
+        };
+        // Masked (lines 10-13): object not yet within tau of its goal, however far the retreat.
+        assert_eq!(release_and_retreat(&p, 3.0, 3.0, 3.0, 0.2), 0.0);
+        assert_eq!(release_and_retreat(&p, 3.0, 3.0, 3.0, 0.5), 0.0);
+        // Unmasked, below both caps: uses the closer hand (line 1).
+        let r = release_and_retreat(&p, 0.5, 0.3, 0.1, 0.05);
+        let expect = 0.7 * (1.0 - (-1.0f32).exp()) + 0.3 * (1.0 - (-0.2f32).exp());
+        assert!((r - expect).abs() < 1e-6, "{r} vs {expect}");
+        // Root cap (lines 4-6) only.
+        let r = release_and_retreat(&p, 1.01, 0.1, 0.1, 0.0);
+        assert!((r - (0.7 + 0.3 * (1.0 - (-0.2f32).exp()))).abs() < 1e-6);
+        // Hand cap (lines 7-9) only: both hands beyond delta_h.
+        let r = release_and_retreat(&p, 0.5, 0.61, 0.7, 0.0);
+        assert!((r - (0.7 * (1.0 - (-1.0f32).exp()) + 0.3)).abs() < 1e-6);
+        // Both capped: the maximum, beta + (1 - beta) = 1.
+        assert_eq!(release_and_retreat(&p, 2.0, 2.0, 2.0, 0.1), 1.0);
+        // Exactly at a cap the exponential form still applies (strict >).
+        let r = release_and_retreat(&p, 1.0, 2.0, 2.0, 0.1);
+        assert!((r - (0.7 * (1.0 - (-2.0f32).exp()) + 0.3)).abs() < 1e-6);
+    }
+}
