@@ -4,6 +4,7 @@
 pub mod batch;
 pub mod bench;
 pub mod character;
+pub mod env;
 pub mod mjcf;
 pub mod obs;
 pub mod room;

@@ -1,0 +1,352 @@
+//! The task environment an actor steps: a [`World`] in a benchmark room plus the pieces of the
+//! task — observations, reward terms, terminations, cycle switching and the AMP history — wired
+//! together. Each piece stays a small pure function in `obs` and `task`.
+
+use crate::mjcf::{CharacterModel, JointKind};
+use crate::obs::{
+    amp_frame, amp_frame_dim, obstacle_map, proprioception, proprioception_dim, task_observation,
+    AmpHistory, BodyState, TASK_OBS_DIM,
+};
+use crate::task::cycles::{CycleTracker, Handoff, SwitchParams};
+use crate::task::rewards::{self, ReleaseRetreat, RewardWeights};
+use crate::task::terminations::{fallen, placement_error};
+use crate::world::{SimConfig, Snapshot, World};
+use lhm_scenes::geometry::Rect;
+use lhm_scenes::routes::obstacle_rect;
+use lhm_scenes::{Catalogue, Task};
+use rapier3d::math::Vector;
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct EnvConfig {
+    pub weights: RewardWeights,
+    pub release_retreat: ReleaseRetreat,
+    pub switching: SwitchParams,
+    /// AMP frames the discriminator sees.
+    pub amp_frames: usize,
+    /// Obstacle map: cells per side and cell size (m).
+    pub map_cells: usize,
+    pub map_cell: f32,
+    /// A body other than feet and hands below this height (m) is a fall.
+    pub fall_height: f32,
+    /// Time limit of an episode, control steps (truncation, not termination).
+    pub max_episode_steps: u32,
+    /// Walking and carrying speeds the reward asks for (m/s).
+    pub walk_speed: f32,
+    pub carry_speed: f32,
+    /// Height (m) an object should be lifted to count as lifted.
+    pub lift_height: f32,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        Self {
+            weights: RewardWeights::default(),
+            release_retreat: ReleaseRetreat::default(),
+            switching: SwitchParams::default(),
+            amp_frames: 10,
+            map_cells: 8,
+            map_cell: 0.25,
+            fall_height: 0.15,
+            max_episode_steps: 1200,
+            walk_speed: 1.5,
+            carry_speed: 1.0,
+            lift_height: 0.3,
+        }
+    }
+}
+
+/// Each task reward term of a step, before weighting (for logging).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RewardTerms {
+    pub locomotion: f32,
+    pub hands: f32,
+    pub lift: f32,
+    pub carry: f32,
+    pub place: f32,
+    pub power: f32,
+    pub release_retreat: f32,
+}
+
+#[derive(Clone, Debug)]
+pub struct StepResult {
+    pub reward: f32,
+    pub terms: RewardTerms,
+    /// Terminal: fell, physics invalid, or every pair handed off.
+    pub done: bool,
+    /// Time limit reached (bootstrap from the value).
+    pub truncated: bool,
+    pub fell: bool,
+    /// The NaN/explosion guard tripped: this step's data must not be used.
+    pub physics_invalid: bool,
+    pub handoff: Handoff,
+}
+
+pub struct TaskEnv {
+    pub model: CharacterModel,
+    pub task: Task,
+    pub config: EnvConfig,
+    pub world: World,
+    pub cycles: CycleTracker,
+    amp: AmpHistory,
+    steps: u32,
+    /// Footprints and heights of the static obstacles, for the obstacle map.
+    obstacles: Vec<(Rect, f32)>,
+    exempt: Vec<bool>,
+    hands: [usize; 2],
+    /// Height of each object at its start, for the lift term.
+    start_z: Vec<f32>,
+}
+
+/// Snapshot of a whole environment: world, cycle state, AMP history, counters.
+#[derive(Clone)]
+pub struct EnvSnapshot {
+    world: Snapshot,
+    cycles: CycleTracker,
+    amp: AmpHistory,
+    steps: u32,
+}
+
+impl TaskEnv {
+    pub fn new(
+        model: &CharacterModel,
+        task: &Task,
+        catalogue: &Catalogue,
+        sim: SimConfig,
+        config: EnvConfig,
+    ) -> Self {
+        let world = World::with_task(model, sim, task, catalogue);
+        let exempt = model
+            .bodies
+            .iter()
+            .map(|b| b.name.ends_with("foot") || b.name.ends_with("hand"))
+            .collect();
+        let hands = [
+            model.body_index("left_hand").unwrap_or(0),
+            model.body_index("right_hand").unwrap_or(0),
+        ];
+        let mut amp = AmpHistory::new(config.amp_frames, amp_frame_dim(model));
+        amp.push(amp_frame(model, &world.body_states()));
+        Self {
+            model: model.clone(),
+            task: task.clone(),
+            cycles: CycleTracker::new(task.sequence.len(), config.switching),
+            amp,
+            steps: 0,
+            obstacles: task
+                .obstacles
+                .iter()
+                .map(|o| (obstacle_rect(o), o.size[2] as f32))
+                .collect(),
+            exempt,
+            hands,
+            start_z: task.objects.iter().map(|o| o.pos[2] as f32).collect(),
+            config,
+            world,
+        }
+    }
+
+    pub fn obs_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
+        proprioception_dim(model) + TASK_OBS_DIM + config.map_cells * config.map_cells
+    }
+
+    pub fn amp_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
+        amp_frame_dim(model) * config.amp_frames
+    }
+
+    /// The current pair's object index, its goal, and the object's half extents.
+    fn current(&self) -> Option<(usize, Vector, Vector)> {
+        let step = self.task.sequence.get(self.cycles.current)?;
+        let i = self.task.object_index(&step.object)?;
+        let s = self.task.objects[i].size;
+        Some((
+            i,
+            Vector::new(
+                step.goal[0] as f32,
+                step.goal[1] as f32,
+                step.goal[2] as f32,
+            ),
+            Vector::new(s[0] as f32, s[1] as f32, s[2] as f32) * 0.5,
+        ))
+    }
+
+    fn object_state(&self, i: usize) -> BodyState {
+        let b = &self.world.state.bodies[self.world.room.objects[i]];
+        BodyState {
+            pos: b.position().translation,
+            rot: b.position().rotation,
+            linvel: b.linvel(),
+            angvel: b.angvel(),
+        }
+    }
+
+    /// Proprioception, then the current pair (after the last pair: the last one again), then the
+    /// obstacle map.
+    pub fn observation(&self) -> Vec<f32> {
+        let bodies = self.world.body_states();
+        let mut obs = proprioception(&bodies);
+        let pair = self.current().or_else(|| {
+            let last = self.task.sequence.len().checked_sub(1)?;
+            let step = &self.task.sequence[last];
+            let i = self.task.object_index(&step.object)?;
+            let s = self.task.objects[i].size;
+            Some((
+                i,
+                Vector::new(
+                    step.goal[0] as f32,
+                    step.goal[1] as f32,
+                    step.goal[2] as f32,
+                ),
+                Vector::new(s[0] as f32, s[1] as f32, s[2] as f32) * 0.5,
+            ))
+        });
+        match pair {
+            Some((i, goal, half)) => obs.extend(task_observation(
+                &bodies[0],
+                &self.object_state(i),
+                half,
+                goal,
+            )),
+            None => obs.extend(std::iter::repeat_n(0.0, TASK_OBS_DIM)),
+        }
+        obs.extend(obstacle_map(
+            &bodies[0],
+            &self.obstacles,
+            self.config.map_cells,
+            self.config.map_cell,
+        ));
+        obs
+    }
+
+    /// The discriminator's input for the latest step.
+    pub fn amp_features(&self) -> Vec<f32> {
+        self.amp.features()
+    }
+
+    pub fn step(&mut self, action: &[f32]) -> StepResult {
+        let targets = self.world.character.targets(action);
+        let ok = self.world.step(action);
+        self.steps += 1;
+        if !ok {
+            return StepResult {
+                reward: 0.0,
+                terms: RewardTerms::default(),
+                done: true,
+                truncated: false,
+                fell: false,
+                physics_invalid: true,
+                handoff: Handoff::Done,
+            };
+        }
+        let bodies = self.world.body_states();
+        self.amp.push(amp_frame(&self.model, &bodies));
+        let mut terms = RewardTerms {
+            power: self.power(&bodies, &targets),
+            ..RewardTerms::default()
+        };
+        let mut handoff = Handoff::Done;
+        if let Some((i, goal, half)) = self.current() {
+            let obj = self.object_state(i);
+            let root = &bodies[0];
+            let to_local = |p: Vector| obj.rot.inverse() * (p - obj.pos);
+            let (lh, rh) = (bodies[self.hands[0]].pos, bodies[self.hands[1]].pos);
+            let w = &self.config;
+            terms.locomotion =
+                rewards::locomotion(root.pos, root.linvel, obj.pos, w.walk_speed, 0.6);
+            terms.hands = rewards::hands_to_object(to_local(lh), to_local(rh), half, 20.0);
+            terms.lift = rewards::lift(obj.pos.z, self.start_z[i], w.lift_height);
+            terms.carry = rewards::carry(obj.pos, obj.linvel, goal, w.carry_speed, 0.3);
+            terms.place = rewards::place(obj.pos, goal, 10.0);
+            let d_goal = placement_error(obj.pos, goal);
+            let d_root = (Vector::new(root.pos.x, root.pos.y, 0.0)
+                - Vector::new(obj.pos.x, obj.pos.y, 0.0))
+            .length();
+            let hand_d = |h: Vector| rewards::distance_to_box(to_local(h), half);
+            terms.release_retreat = rewards::release_and_retreat(
+                &w.release_retreat,
+                d_root,
+                hand_d(lh),
+                hand_d(rh),
+                d_goal,
+            );
+            handoff = self.cycles.update(d_goal, obj.linvel.length());
+        }
+        let w = &self.config.weights;
+        let reward = w.locomotion * terms.locomotion
+            + w.hands * terms.hands
+            + w.lift * terms.lift
+            + w.carry * terms.carry
+            + w.place * terms.place
+            + w.power * terms.power
+            + w.release_retreat * terms.release_retreat;
+        let heights: Vec<f32> = bodies.iter().map(|b| b.pos.z).collect();
+        let fell = fallen(&heights, &self.exempt, self.config.fall_height);
+        let done = fell || handoff == Handoff::Done;
+        StepResult {
+            reward,
+            terms,
+            done,
+            truncated: !done && self.steps >= self.config.max_episode_steps,
+            fell,
+            physics_invalid: false,
+            handoff,
+        }
+    }
+
+    /// PD torques the servos apply (from the same error the drive uses), times joint velocities.
+    fn power(&self, bodies: &[BodyState], targets: &[f32]) -> f32 {
+        let mut torques = Vec::with_capacity(self.model.dofs.len());
+        let mut velocities = Vec::with_capacity(self.model.dofs.len());
+        for (i, body) in self.model.bodies.iter().enumerate() {
+            let Some(p) = body.parent else { continue };
+            let rel = (bodies[p].rot.inverse() * bodies[i].rot).normalize();
+            let relvel = bodies[p].rot.inverse() * (bodies[i].angvel - bodies[p].angvel);
+            match &body.joint {
+                JointKind::Hinge { dof } => {
+                    let d = &self.model.dofs[*dof];
+                    let axis = Vector::from_array(d.axis.map(|a| a as f32));
+                    let q = crate::obs::twist_angle(rel, axis);
+                    let qd = relvel.dot(axis);
+                    let limit = d.torque_limit as f32;
+                    torques.push(
+                        (d.kp as f32 * (targets[*dof] - q) - d.kd as f32 * qd).clamp(-limit, limit),
+                    );
+                    velocities.push(qd);
+                }
+                JointKind::Ball { dofs } => {
+                    let target = rapier3d::math::Rotation::from_rotation_x(targets[dofs[0]])
+                        * rapier3d::math::Rotation::from_rotation_y(targets[dofs[1]])
+                        * rapier3d::math::Rotation::from_rotation_z(targets[dofs[2]]);
+                    let e = (target * rel.inverse()).normalize().to_scaled_axis();
+                    for k in 0..3 {
+                        let d = &self.model.dofs[dofs[k]];
+                        let limit = d.torque_limit as f32;
+                        torques.push(
+                            (d.kp as f32 * e[k] - d.kd as f32 * relvel[k]).clamp(-limit, limit),
+                        );
+                        velocities.push(relvel[k]);
+                    }
+                }
+                JointKind::Free | JointKind::Fixed => {}
+            }
+        }
+        rewards::power_penalty(&torques, &velocities)
+    }
+
+    pub fn snapshot(&self) -> EnvSnapshot {
+        EnvSnapshot {
+            world: self.world.snapshot(),
+            cycles: self.cycles.clone(),
+            amp: self.amp.clone(),
+            steps: self.steps,
+        }
+    }
+
+    pub fn restore(&mut self, s: &EnvSnapshot) {
+        self.world.restore(&s.world);
+        self.cycles = s.cycles.clone();
+        self.amp = s.amp.clone();
+        self.steps = s.steps;
+    }
+}

@@ -1,0 +1,148 @@
+//! The wired task environment.
+
+use lhm_scenes::{Benchmark, Split};
+use lhm_sim::env::{EnvConfig, TaskEnv};
+use lhm_sim::task::cycles::Handoff;
+use lhm_sim::{CharacterModel, SimConfig};
+use rapier3d::prelude::*;
+
+fn setup(config: EnvConfig) -> (CharacterModel, TaskEnv) {
+    let b = Benchmark::embedded().expect("benchmark");
+    let model = CharacterModel::amp_humanoid();
+    let task = &b.tasks(Split::Train)[1];
+    let env = TaskEnv::new(&model, task, &b.catalogue, SimConfig::default(), config);
+    (model, env)
+}
+
+#[test]
+fn observations_have_their_dimensions_and_a_fall_is_terminal() {
+    let config = EnvConfig::default();
+    let (model, mut env) = setup(config.clone());
+    let zero = vec![0.0; model.dofs.len()];
+    assert_eq!(env.observation().len(), TaskEnv::obs_dim(&model, &config));
+    assert_eq!(env.amp_features().len(), TaskEnv::amp_dim(&model, &config));
+    let mut ended = None;
+    for step in 0..300 {
+        let r = env.step(&zero);
+        let obs = env.observation();
+        assert!(
+            obs.iter()
+                .chain(env.amp_features().iter())
+                .all(|x| x.is_finite()),
+            "step {step}"
+        );
+        assert!(r.reward.is_finite() && r.terms.power <= 0.0);
+        if r.done {
+            ended = Some((step, r));
+            break;
+        }
+    }
+    let (step, r) = ended.expect("zero action falls within 10 s");
+    assert!(r.fell && !r.truncated && !r.physics_invalid, "{r:?}");
+    assert!(step > 10, "fell at step {step}");
+}
+
+#[test]
+fn env_snapshot_restore_replays_observations_and_rewards() {
+    let (model, mut env) = setup(EnvConfig {
+        fall_height: -1.0,
+        ..EnvConfig::default()
+    });
+    let action: Vec<f32> = (0..model.dofs.len())
+        .map(|i| ((i * 7 % 5) as f32 - 2.0) * 0.15)
+        .collect();
+    for _ in 0..5 {
+        env.step(&action);
+    }
+    let snap = env.snapshot();
+    let run = |env: &mut TaskEnv| {
+        (0..60)
+            .map(|_| {
+                let r = env.step(&action);
+                (
+                    env.observation(),
+                    env.amp_features(),
+                    r.reward.to_bits(),
+                    r.done,
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    let first = run(&mut env);
+    env.restore(&snap);
+    assert!(first == run(&mut env), "replay differs");
+}
+
+#[test]
+fn pairs_hand_off_without_a_reset_when_objects_settle_on_their_goals() {
+    let config = EnvConfig {
+        fall_height: -1.0,
+        ..EnvConfig::default()
+    };
+    let (model, mut env) = setup(config.clone());
+    let zero = vec![0.0; model.dofs.len()];
+    let mut handoffs = Vec::new();
+    for pair in 0..env.task.sequence.len() {
+        // Put the current object on its goal, at rest (as a perfect placement would leave it).
+        let step = env.task.sequence[pair].clone();
+        let i = env.task.object_index(&step.object).expect("object");
+        let h = env.world.room.objects[i];
+        let goal = Vector::new(
+            step.goal[0] as f32,
+            step.goal[1] as f32,
+            step.goal[2] as f32 + 0.002,
+        );
+        let body = &mut env.world.state.bodies[h];
+        body.set_position(
+            Pose::from_parts(goal, Rotation::from_rotation_z(step.goal_yaw as f32)),
+            true,
+        );
+        body.set_linvel(Vector::ZERO, true);
+        body.set_angvel(Vector::ZERO, true);
+        let mut steps = 0;
+        loop {
+            let r = env.step(&zero);
+            steps += 1;
+            if r.handoff != Handoff::Continue {
+                handoffs.push((r.handoff, r.done));
+                break;
+            }
+            assert!(steps < 100, "pair {pair} never handed off");
+        }
+        assert!(
+            steps >= config.switching.hold_steps as usize,
+            "held {steps} steps"
+        );
+    }
+    assert_eq!(
+        handoffs,
+        vec![(Handoff::Next, false), (Handoff::Done, true)]
+    );
+    assert!(
+        env.cycles
+            .results
+            .iter()
+            .all(|r| r.success && r.dist < 0.05),
+        "{:?}",
+        env.cycles.results
+    );
+    // One continuous world: its step counter is the sum of the cycles' steps, and the first
+    // object is still on its goal after the second pair.
+    assert_eq!(
+        env.world.control_steps as usize,
+        env.cycles
+            .results
+            .iter()
+            .map(|r| r.steps as usize)
+            .sum::<usize>()
+    );
+    let first = &env.task.sequence[0];
+    let i = env.task.object_index(&first.object).expect("object");
+    let p = env.world.object_pose(i).expect("pose").translation;
+    let goal = Vector::new(
+        first.goal[0] as f32,
+        first.goal[1] as f32,
+        first.goal[2] as f32,
+    );
+    assert!((p - goal).length() < 0.05, "first object moved to {p:?}");
+}
