@@ -54,6 +54,8 @@ impl Character {
             let rb = RigidBodyBuilder::dynamic()
                 .pose(Pose::from_parts(pos, root.rotation))
                 .ccd_enabled(false)
+                // A controlled character must never sleep: new servo targets do not wake it.
+                .can_sleep(false)
                 .build();
             let h = bodies.insert(rb);
             for g in &body.geoms {

@@ -21,6 +21,9 @@ pub struct SimConfig {
     pub spawn_height: f32,
     /// Contacts between the character's own links (parent-child pairs never collide).
     pub self_collisions: bool,
+    /// Tests and debugging only: weld the root to the world where it spawns, so limbs can be
+    /// exercised without balancing.
+    pub pin_root: bool,
 }
 
 impl Default for SimConfig {
@@ -34,6 +37,7 @@ impl Default for SimConfig {
             pipeline_steps_per_control: 4,
             spawn_height: 0.89,
             self_collisions: true,
+            pin_root: false,
         }
     }
 }
@@ -150,6 +154,19 @@ impl World {
                 )
             },
         );
+        if config.pin_root {
+            let root = character.root();
+            let pose = *state.bodies[root].position();
+            let anchor = state
+                .bodies
+                .insert(RigidBodyBuilder::fixed().pose(pose).build());
+            state.multibody_joints.insert(
+                anchor,
+                root,
+                FixedJointBuilder::new().contacts_enabled(false).build(),
+                true,
+            );
+        }
         let steps = config.pipeline_steps_per_control.max(1);
         let params = IntegrationParameters {
             dt: 1.0 / (config.control_hz * steps as f32),
