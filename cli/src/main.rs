@@ -2,6 +2,7 @@
 //! the library crates.
 
 mod bench_cmd;
+mod render_cmd;
 mod scenes_cmd;
 
 use clap::{Parser, Subcommand};
@@ -24,6 +25,8 @@ enum Command {
     Scenes(scenes_cmd::ScenesArgs),
     /// Throughput benchmarks (results go in BENCHMARKS.md).
     Bench(bench_cmd::BenchArgs),
+    /// Animated GIF of the character in a benchmark room under a simple policy.
+    RenderRollout(render_cmd::RenderRolloutArgs),
 }
 
 fn main() -> ExitCode {
@@ -37,6 +40,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Scenes(args) => scenes_cmd::run(args),
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
+        Command::RenderRollout(args) => render_cmd::run(args).map(|()| ExitCode::SUCCESS),
     };
     match result {
         Ok(code) => code,

@@ -7,6 +7,7 @@ pub mod character;
 pub mod env;
 pub mod mjcf;
 pub mod obs;
+pub mod render;
 pub mod room;
 pub mod task;
 pub mod world;

@@ -13,6 +13,8 @@ pub const OBJECT_FRICTION: f32 = 0.9;
 /// Handles of what a room added to the world.
 #[derive(Clone, Debug, Default)]
 pub struct Room {
+    /// The fixed body carrying the four walls.
+    pub walls: Option<RigidBodyHandle>,
     pub obstacles: Vec<RigidBodyHandle>,
     /// In task order (`task.objects`).
     pub objects: Vec<RigidBodyHandle>,
@@ -43,6 +45,7 @@ pub fn build_room(
     let mut room = Room::default();
     let [w, d] = task.room_size.map(|x| x as f32);
     let walls = bodies.insert(RigidBodyBuilder::fixed().build());
+    room.walls = Some(walls);
     let t = WALL_THICKNESS / 2.0;
     for (pos, half) in [
         (
