@@ -1,5 +1,7 @@
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
+use lhm_learner::bench::BenchSpec;
+use lhm_nets::MlpConfig;
 use lhm_scenes::Benchmark;
 use lhm_sim::bench::run_env_bench;
 use lhm_sim::{CharacterModel, SimConfig};
@@ -31,6 +33,19 @@ enum BenchCommand {
         /// Another MJCF character instead of the shipped AMP humanoid.
         #[arg(long, value_name = "XML")]
         character: Option<PathBuf>,
+        /// Pipeline steps per control step (default: the training setting, 4 x 1/120 s).
+        #[arg(long)]
+        pipeline_steps: Option<usize>,
+    },
+    /// Learner update throughput: one PPO minibatch step (policy + value forward, loss, backward,
+    /// Adam; 256-d observations, 28-d actions, minibatch 4096) and one AMP discriminator step,
+    /// for the default (1024-512) and CPU (512-256) network presets. Threads: RAYON_NUM_THREADS,
+    /// else all cores.
+    Learner {
+        #[arg(long)]
+        json: bool,
+        #[arg(long, default_value_t = 7)]
+        repetitions: usize,
     },
 }
 
@@ -43,6 +58,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             repetitions,
             threads,
             character,
+            pipeline_steps,
         } => {
             let bench = Benchmark::embedded()?;
             let (_, task) = bench
@@ -54,9 +70,13 @@ pub fn run(args: BenchArgs) -> Result<()> {
             };
             let threads = threads
                 .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
+            let mut config = SimConfig::default();
+            if let Some(n) = pipeline_steps {
+                config.pipeline_steps_per_control = n.max(1);
+            }
             let r = run_env_bench(
                 &model,
-                &SimConfig::default(),
+                &config,
                 task,
                 &bench.catalogue,
                 steps,
@@ -77,6 +97,32 @@ pub fn run(args: BenchArgs) -> Result<()> {
                     r.repetitions,
                     r.steps_per_repetition
                 );
+            }
+            Ok(())
+        }
+        BenchCommand::Learner { json, repetitions } => {
+            let spec = |hidden: Vec<usize>| BenchSpec {
+                hidden,
+                repetitions: repetitions.max(1),
+                ..BenchSpec::default()
+            };
+            let default = lhm_learner::bench::run(&spec(MlpConfig::default().hidden))?;
+            let cpu = lhm_learner::bench::run(&spec(MlpConfig::cpu_preset().hidden))?;
+            if json {
+                let out = serde_json::json!({
+                    "ppo_samples_per_s": default.ppo_samples_per_s,
+                    "amp_samples_per_s": default.amp_samples_per_s,
+                    "default": default,
+                    "cpu": cpu,
+                });
+                println!("{}", serde_json::to_string_pretty(&out)?);
+            } else {
+                for (name, r) in [("default", &default), ("cpu", &cpu)] {
+                    println!(
+                        "{name} {:?}: PPO step {:.0} ms ({:.0} samples/s), AMP step {:.0} ms ({:.0} samples/s), {} threads",
+                        r.spec.hidden, r.ppo.median_ms, r.ppo_samples_per_s, r.amp.median_ms, r.amp_samples_per_s, r.threads
+                    );
+                }
             }
             Ok(())
         }

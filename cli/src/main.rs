@@ -29,7 +29,21 @@ enum Command {
     RenderRollout(render_cmd::RenderRolloutArgs),
 }
 
+/// candle allocates a fresh buffer per tensor op and glibc serves large ones with mmap, so every
+/// learner step pays page faults (measured: 2.75M minor faults and ~20% of a PPO step). Raising
+/// the mmap and trim thresholds keeps those buffers in the heap.
+fn tune_allocator() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes allocator parameters; it is called before any other thread
+    // exists.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, i32::MAX);
+    }
+}
+
 fn main() -> ExitCode {
+    tune_allocator();
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),

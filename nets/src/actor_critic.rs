@@ -1,0 +1,125 @@
+//! The policy, its value function and the observation normaliser they share: what an actor needs
+//! to act and what the learner trains.
+
+use candle_core::{DType, Tensor, Var};
+use serde::{Deserialize, Serialize};
+
+use crate::{
+    rows_tensor, GaussianPolicy, GaussianPolicyConfig, MlpConfig, NetResult, RunningMeanStd,
+    SplitMix64, ValueNet,
+};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ActorCriticConfig {
+    pub policy: GaussianPolicyConfig,
+    pub value: MlpConfig,
+    /// Whiten observations with running statistics before both networks.
+    pub normalize_obs: bool,
+    /// Seed of the initial weights.
+    pub init_seed: u64,
+}
+
+impl Default for ActorCriticConfig {
+    fn default() -> Self {
+        Self {
+            policy: GaussianPolicyConfig::default(),
+            value: MlpConfig::default(),
+            normalize_obs: true,
+            init_seed: 0,
+        }
+    }
+}
+
+impl ActorCriticConfig {
+    /// The same layout with hidden sizes `hidden` for both networks (tests, CPU runs).
+    pub fn with_hidden(hidden: &[usize]) -> Self {
+        let mut config = Self::default();
+        config.policy.mlp.hidden = hidden.to_vec();
+        config.value.hidden = hidden.to_vec();
+        config
+    }
+}
+
+/// One batch of acting: flat row-major actions, their log-probabilities, and state values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ActOutput {
+    pub actions: Vec<f32>,
+    pub log_probs: Vec<f32>,
+    pub values: Vec<f32>,
+}
+
+#[derive(Debug, Clone)]
+pub struct ActorCritic {
+    pub config: ActorCriticConfig,
+    pub policy: GaussianPolicy,
+    pub value: ValueNet,
+    /// `None` when `normalize_obs` is off.
+    pub obs_norm: Option<RunningMeanStd>,
+}
+
+impl ActorCritic {
+    pub fn new(obs_dim: usize, act_dim: usize, config: &ActorCriticConfig) -> NetResult<Self> {
+        let mut rng = SplitMix64::new(config.init_seed);
+        let policy = GaussianPolicy::new(obs_dim, act_dim, &config.policy, &mut rng, DType::F32)?;
+        let value = ValueNet::new(obs_dim, &config.value, &mut rng, DType::F32)?;
+        let obs_norm = config.normalize_obs.then(|| RunningMeanStd::new(obs_dim));
+        Ok(Self {
+            config: config.clone(),
+            policy,
+            value,
+            obs_norm,
+        })
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.policy.obs_dim()
+    }
+
+    pub fn act_dim(&self) -> usize {
+        self.policy.act_dim()
+    }
+
+    /// Raw observation rows → the network input tensor [B, obs_dim].
+    pub fn input_tensor(&self, raw_obs: &[f32]) -> NetResult<Tensor> {
+        match &self.obs_norm {
+            Some(norm) => norm.normalize_tensor(raw_obs),
+            None => rows_tensor(raw_obs, self.obs_dim()),
+        }
+    }
+
+    /// Samples actions for a batch of raw observations.
+    pub fn act(&self, raw_obs: &[f32], rng: &mut SplitMix64) -> NetResult<ActOutput> {
+        let obs = self.input_tensor(raw_obs)?;
+        let (actions, log_probs) = self.policy.sample(&obs, rng)?;
+        Ok(ActOutput {
+            actions: actions.flatten_all()?.to_vec1()?,
+            log_probs: log_probs.to_vec1()?,
+            values: self.value.forward(&obs)?.to_vec1()?,
+        })
+    }
+
+    /// Mean actions (evaluation / deployment).
+    pub fn act_deterministic(&self, raw_obs: &[f32]) -> NetResult<Vec<f32>> {
+        Ok(self
+            .policy
+            .mean(&self.input_tensor(raw_obs)?)?
+            .flatten_all()?
+            .to_vec1()?)
+    }
+
+    /// V(s) for raw observations (e.g. to bootstrap a truncated episode).
+    pub fn values(&self, raw_obs: &[f32]) -> NetResult<Vec<f32>> {
+        Ok(self
+            .value
+            .forward(&self.input_tensor(raw_obs)?)?
+            .to_vec1()?)
+    }
+
+    /// Every trained parameter: `policy.*` then `value.*`.
+    pub fn named_vars(&self) -> Vec<(String, Var)> {
+        let mut vars = self.policy.named_vars("policy");
+        vars.extend(self.value.named_vars("value"));
+        vars
+    }
+}
