@@ -189,9 +189,7 @@ impl Character {
                     );
                 }
                 JointKind::Ball { dofs } => {
-                    let target = Rotation::from_rotation_x(targets[dofs[0]])
-                        * Rotation::from_rotation_y(targets[dofs[1]])
-                        * Rotation::from_rotation_z(targets[dofs[2]]);
+                    let target = ball_target(targets, dofs);
                     // rapier integrates a 3-DoF joint as joint_rot = exp(ω dt) · joint_rot, so the
                     // error rotation on the left, as a rotation vector, is in the coordinates'
                     // frame.
@@ -220,4 +218,12 @@ impl Character {
     pub fn root(&self) -> RigidBodyHandle {
         self.bodies[0]
     }
+}
+
+/// The target rotation of a 3-DoF joint: its three hinge targets composed Rx·Ry·Rz, as MuJoCo
+/// composes three hinges in one body.
+pub fn ball_target(targets: &[f32], dofs: &[usize; 3]) -> Rotation {
+    Rotation::from_rotation_x(targets[dofs[0]])
+        * Rotation::from_rotation_y(targets[dofs[1]])
+        * Rotation::from_rotation_z(targets[dofs[2]])
 }

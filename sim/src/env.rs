@@ -155,9 +155,9 @@ impl TaskEnv {
         amp_frame_dim(model) * config.amp_frames
     }
 
-    /// The current pair's object index, its goal, and the object's half extents.
-    fn current(&self) -> Option<(usize, Vector, Vector)> {
-        let step = self.task.sequence.get(self.cycles.current)?;
+    /// Pair `k`'s object index, its goal, and the object's half extents.
+    fn pair(&self, k: usize) -> Option<(usize, Vector, Vector)> {
+        let step = self.task.sequence.get(k)?;
         let i = self.task.object_index(&step.object)?;
         let s = self.task.objects[i].size;
         Some((
@@ -169,6 +169,10 @@ impl TaskEnv {
             ),
             Vector::new(s[0] as f32, s[1] as f32, s[2] as f32) * 0.5,
         ))
+    }
+
+    fn current(&self) -> Option<(usize, Vector, Vector)> {
+        self.pair(self.cycles.current)
     }
 
     fn object_state(&self, i: usize) -> BodyState {
@@ -186,21 +190,9 @@ impl TaskEnv {
     pub fn observation(&self) -> Vec<f32> {
         let bodies = self.world.body_states();
         let mut obs = proprioception(&bodies);
-        let pair = self.current().or_else(|| {
-            let last = self.task.sequence.len().checked_sub(1)?;
-            let step = &self.task.sequence[last];
-            let i = self.task.object_index(&step.object)?;
-            let s = self.task.objects[i].size;
-            Some((
-                i,
-                Vector::new(
-                    step.goal[0] as f32,
-                    step.goal[1] as f32,
-                    step.goal[2] as f32,
-                ),
-                Vector::new(s[0] as f32, s[1] as f32, s[2] as f32) * 0.5,
-            ))
-        });
+        // After the last handoff the last pair stays in view.
+        let last = self.task.sequence.len().saturating_sub(1);
+        let pair = self.pair(self.cycles.current.min(last));
         match pair {
             Some((i, goal, half)) => obs.extend(task_observation(
                 &bodies[0],
@@ -315,9 +307,7 @@ impl TaskEnv {
                     velocities.push(qd);
                 }
                 JointKind::Ball { dofs } => {
-                    let target = rapier3d::math::Rotation::from_rotation_x(targets[dofs[0]])
-                        * rapier3d::math::Rotation::from_rotation_y(targets[dofs[1]])
-                        * rapier3d::math::Rotation::from_rotation_z(targets[dofs[2]]);
+                    let target = crate::character::ball_target(targets, dofs);
                     let e = (target * rel.inverse()).normalize().to_scaled_axis();
                     for k in 0..3 {
                         let d = &self.model.dofs[dofs[k]];
