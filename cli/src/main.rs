@@ -2,6 +2,7 @@
 //! the library crates.
 
 mod bench_cmd;
+mod motion_cmd;
 mod render_cmd;
 mod scenes_cmd;
 
@@ -25,6 +26,8 @@ enum Command {
     Scenes(scenes_cmd::ScenesArgs),
     /// Throughput benchmarks (results go in BENCHMARKS.md).
     Bench(bench_cmd::BenchArgs),
+    /// Reference motion clips for AMP.
+    Motion(motion_cmd::MotionArgs),
     /// Animated GIF of the character in a benchmark room under a simple policy.
     RenderRollout(render_cmd::RenderRolloutArgs),
 }
@@ -54,6 +57,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Scenes(args) => scenes_cmd::run(args),
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
+        Command::Motion(args) => motion_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::RenderRollout(args) => render_cmd::run(args).map(|()| ExitCode::SUCCESS),
     };
     match result {

@@ -6,6 +6,7 @@ pub mod bench;
 pub mod character;
 pub mod env;
 pub mod mjcf;
+pub mod motion;
 pub mod obs;
 pub mod render;
 pub mod room;
