@@ -74,15 +74,26 @@ pub fn render(world: &World, camera: &Camera, third_person: bool) -> Image {
     let walls = world.room.walls;
     // Every collider is tested directly (a few dozen), so rendering needs no broad-phase state
     // and works on a world that was just built or restored.
-    let shapes: Vec<(
+    type Shape<'a> = (
         Option<RigidBodyHandle>,
-        &Collider,
+        &'a Collider,
+        Pose,
         rapier3d::parry::bounding_volume::Aabb,
-    )> = s
+    );
+    let shapes: Vec<Shape> = s
         .colliders
         .iter()
-        .map(|(_, c)| (c.parent(), c, c.compute_aabb()))
-        .filter(|(parent, _, _)| {
+        .map(|(_, c)| {
+            // From the parent body's pose, not the collider's cached one: that is only refreshed
+            // by a physics step, and kinematic playback moves bodies without stepping.
+            let pose = c
+                .parent()
+                .and_then(|p| s.bodies.get(p))
+                .zip(c.position_wrt_parent())
+                .map_or(*c.position(), |(b, local)| *b.position() * *local);
+            (c.parent(), c, pose, c.shape().compute_aabb(&pose))
+        })
+        .filter(|(parent, _, _, _)| {
             if third_person {
                 walls.is_none() || *parent != walls
             } else {
@@ -108,15 +119,14 @@ pub fn render(world: &World, camera: &Camera, third_person: bool) -> Image {
                 Option<RigidBodyHandle>,
                 rapier3d::parry::query::RayIntersection,
             )> = None;
-            for (parent, collider, aabb) in &shapes {
+            for (parent, collider, pose, aabb) in &shapes {
                 let max = nearest.as_ref().map_or(100.0, |(_, h)| h.time_of_impact);
                 if aabb.cast_local_ray(&ray, max, true).is_none() {
                     continue;
                 }
-                if let Some(hit) =
-                    collider
-                        .shape()
-                        .cast_ray_and_get_normal(collider.position(), &ray, max, true)
+                if let Some(hit) = collider
+                    .shape()
+                    .cast_ray_and_get_normal(pose, &ray, max, true)
                 {
                     nearest = Some((*parent, hit));
                 }

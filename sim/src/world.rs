@@ -301,3 +301,16 @@ impl World {
             .collect()
     }
 }
+
+impl World {
+    /// Places the character's bodies at `poses` (world, model order) without simulating: for
+    /// kinematic playback of reference motion. Stepping afterwards starts from an inconsistent
+    /// multibody state; rebuild the world to simulate again.
+    pub fn set_kinematic_pose(&mut self, poses: &[(Vector, Rotation)]) {
+        for (h, (pos, rot)) in self.character.bodies.iter().zip(poses) {
+            if let Some(b) = self.state.bodies.get_mut(*h) {
+                b.set_position(Pose::from_parts(*pos, *rot), false);
+            }
+        }
+    }
+}

@@ -4,6 +4,7 @@
 pub mod deepmimic;
 pub mod library;
 pub mod omomo;
+pub mod retarget;
 
 use std::path::PathBuf;
 
