@@ -218,7 +218,7 @@ impl TaskEnv {
 
     pub fn step(&mut self, action: &[f32]) -> StepResult {
         let targets = self.world.character.targets(action);
-        let ok = self.world.step(action);
+        let ok = self.world.step_targets(&targets);
         self.steps += 1;
         if !ok {
             return StepResult {
@@ -292,8 +292,7 @@ impl TaskEnv {
         let mut velocities = Vec::with_capacity(self.model.dofs.len());
         for (i, body) in self.model.bodies.iter().enumerate() {
             let Some(p) = body.parent else { continue };
-            let rel = (bodies[p].rot.inverse() * bodies[i].rot).normalize();
-            let relvel = bodies[p].rot.inverse() * (bodies[i].angvel - bodies[p].angvel);
+            let (rel, relvel) = crate::obs::joint_state(&bodies[p], &bodies[i]);
             match &body.joint {
                 JointKind::Hinge { dof } => {
                     let d = &self.model.dofs[*dof];

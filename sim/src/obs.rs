@@ -182,6 +182,16 @@ pub fn twist_angle(r: Rotation, axis: Vector) -> f32 {
     }
 }
 
+/// A joint's rotation and angular velocity, child relative to parent in the parent's frame, read
+/// from body states (rapier's own 3-DoF joint coordinates are integrated approximations).
+pub fn joint_state(parent: &BodyState, child: &BodyState) -> (Rotation, Vector) {
+    let inv = parent.rot.inverse();
+    (
+        (inv * child.rot).normalize(),
+        inv * (child.angvel - parent.angvel),
+    )
+}
+
 /// One AMP frame. Joint rotations are read from body poses (parent⁻¹ · child): rapier's own 3-DoF
 /// joint coordinates are integrated approximations.
 pub fn amp_frame(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
@@ -198,8 +208,7 @@ pub fn amp_frame(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
     for (i, body) in model.bodies.iter().enumerate() {
         let Some(p) = body.parent else { continue };
         let (parent, child) = (&bodies[p], &bodies[i]);
-        let rel = (parent.rot.inverse() * child.rot).normalize();
-        let relvel = parent.rot.inverse() * (child.angvel - parent.angvel);
+        let (rel, relvel) = joint_state(parent, child);
         match &body.joint {
             JointKind::Ball { .. } => {
                 out.extend_from_slice(&rot6(rel));

@@ -189,13 +189,19 @@ impl World {
     /// One control step: PD targets from `action`, then the physics of one control period.
     /// Returns false (and stops stepping for good) once the state is non-finite or exploded.
     pub fn step(&mut self, action: &[f32]) -> bool {
+        let targets = self.character.targets(action);
+        self.step_targets(&targets)
+    }
+
+    /// One control step toward PD `targets` (radians, one per DoF, as [`Character::targets`]
+    /// makes them), for callers that also need the targets themselves.
+    pub fn step_targets(&mut self, targets: &[f32]) -> bool {
         if self.physics_invalid {
             return false;
         }
-        let targets = self.character.targets(action);
         for _ in 0..self.config.pipeline_steps_per_control.max(1) {
             self.character
-                .drive(&targets, &mut self.state.multibody_joints);
+                .drive(targets, &mut self.state.multibody_joints);
             let s = &mut self.state;
             self.pipeline.step(
                 self.gravity,
