@@ -8,6 +8,7 @@
 //! the source instead of at the learner.
 
 mod error;
+pub mod keys;
 mod validate;
 mod wire;
 
@@ -31,6 +32,6 @@ pub mod v1 {
 }
 
 pub use v1::{
-    ActorState, ActorStatus, EpisodeStats, LabelReply, LabelRequest, Metrics, Normalizer,
-    PolicyWeights, Role, Stage, TrajectoryChunk,
+    ActorState, ActorStatus, EpisodeFrames, EpisodeStats, LabelReply, LabelRequest, Metrics,
+    Normalizer, PolicyWeights, Role, Stage, TrajectoryChunk,
 };

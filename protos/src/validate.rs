@@ -6,8 +6,8 @@
 use std::fmt::Arguments;
 
 use crate::{
-    ActorState, ActorStatus, EpisodeStats, LabelReply, LabelRequest, Metrics, Normalizer,
-    PolicyWeights, Role, Stage, TrajectoryChunk, WireError, WireMessage,
+    ActorState, ActorStatus, EpisodeFrames, EpisodeStats, LabelReply, LabelRequest, Metrics,
+    Normalizer, PolicyWeights, Role, Stage, TrajectoryChunk, WireError, WireMessage,
 };
 
 type Result = std::result::Result<(), WireError>;
@@ -281,4 +281,49 @@ pub(crate) fn metrics(m: &Metrics) -> Result {
         "values",
         format_args!("metric names must not be empty"),
     )
+}
+
+pub(crate) fn episode_frames(m: &EpisodeFrames) -> Result {
+    let c = Check::of::<EpisodeFrames>();
+    c.non_empty("run_id", &m.run_id)?;
+    c.non_empty("actor_id", &m.actor_id)?;
+    c.role("role", m.role)?;
+    c.non_empty("task_id", &m.task_id)?;
+    c.ensure(
+        m.frame_dt.is_finite() && m.frame_dt > 0.0,
+        "frame_dt",
+        format_args!("{} is not a positive number of seconds", m.frame_dt),
+    )?;
+    c.positive("num_frames", m.num_frames)?;
+    c.positive("num_bodies", m.num_bodies)?;
+    let n = m.num_frames;
+    let per_frame = |k: u32, each: u32| k.checked_mul(each).unwrap_or(u32::MAX);
+    c.shape(
+        "body_positions",
+        m.body_positions.len(),
+        n,
+        per_frame(m.num_bodies, 3),
+    )?;
+    c.shape(
+        "body_rotations",
+        m.body_rotations.len(),
+        n,
+        per_frame(m.num_bodies, 4),
+    )?;
+    c.shape(
+        "object_positions",
+        m.object_positions.len(),
+        n,
+        per_frame(m.num_objects, 3),
+    )?;
+    c.shape(
+        "object_rotations",
+        m.object_rotations.len(),
+        n,
+        per_frame(m.num_objects, 4),
+    )?;
+    c.finite("body_positions", &m.body_positions)?;
+    c.finite("body_rotations", &m.body_rotations)?;
+    c.finite("object_positions", &m.object_positions)?;
+    c.finite("object_rotations", &m.object_rotations)
 }

@@ -1,6 +1,6 @@
 use crate::{
-    validate, ActorStatus, LabelReply, LabelRequest, Metrics, PolicyWeights, TrajectoryChunk,
-    WireError, SCHEMA_VERSION,
+    validate, ActorStatus, EpisodeFrames, LabelReply, LabelRequest, Metrics, PolicyWeights,
+    TrajectoryChunk, WireError, SCHEMA_VERSION,
 };
 
 /// A top-level `lhm.v1` message: versioned, validated, safe to decode from untrusted bytes.
@@ -105,4 +105,5 @@ wire_message! {
     LabelReply => validate::label_reply,
     ActorStatus => validate::actor_status,
     Metrics => validate::metrics,
+    EpisodeFrames => validate::episode_frames,
 }
