@@ -77,7 +77,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             let r = run_env_bench(
                 &model,
                 &config,
-                task,
+                &task,
                 &bench.catalogue,
                 steps,
                 repetitions.max(1),

@@ -2,6 +2,8 @@
 //! the library crates.
 
 mod bench_cmd;
+mod cluster_cmd;
+mod demo;
 mod motion_cmd;
 mod render_cmd;
 mod scenes_cmd;
@@ -22,6 +24,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Train Teacher 1 on this machine: the learner on loopback and one actor process per core.
+    Train(cluster_cmd::TrainArgs),
+    /// The learner service alone (actors connect to it with `lhm actor --connect`).
+    Learner(cluster_cmd::LearnerArgs),
+    /// One actor process: simulates episodes and streams trajectories to a learner.
+    Actor(cluster_cmd::ActorArgs),
     /// The benchmark: generate, validate, summarise and draw its tasks.
     Scenes(scenes_cmd::ScenesArgs),
     /// Throughput benchmarks (results go in BENCHMARKS.md).
@@ -55,6 +63,9 @@ fn main() -> ExitCode {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Train(args) => cluster_cmd::train(args).map(|()| ExitCode::SUCCESS),
+        Command::Learner(args) => cluster_cmd::learner(args).map(|()| ExitCode::SUCCESS),
+        Command::Actor(args) => cluster_cmd::actor(args).map(|()| ExitCode::SUCCESS),
         Command::Scenes(args) => scenes_cmd::run(args),
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Motion(args) => motion_cmd::run(args).map(|()| ExitCode::SUCCESS),

@@ -57,7 +57,7 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         .with_context(|| format!("no task {:?}", a.task))?;
     let model = CharacterModel::amp_humanoid();
     let config = SimConfig::default();
-    let mut world = World::with_task(&model, config.clone(), task, &bench.catalogue);
+    let mut world = World::with_task(&model, config.clone(), &task, &bench.catalogue);
     let mut rng = SplitMix64::new(a.seed);
     let steps = (a.seconds * config.control_hz).round() as usize;
     // Every other control step: a 15 fps GIF.

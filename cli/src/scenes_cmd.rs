@@ -179,14 +179,14 @@ fn render_cmd(b: &Benchmark, id: &str, output: &Path) -> Result<ExitCode> {
     let (_, task) = b
         .task(id)
         .with_context(|| format!("no task {id:?} (see `lhm scenes stats`)"))?;
-    let legs = match plan_task(task, &Clearance::default()) {
+    let legs = match plan_task(&task, &Clearance::default()) {
         Ok(legs) => Some(legs),
         Err(e) => {
             tracing::warn!("drawing {id} without routes: {e}");
             None
         }
     };
-    let canvas = render_task(task, &b.catalogue, legs.as_deref());
+    let canvas = render_task(&task, &b.catalogue, legs.as_deref());
     let file =
         std::fs::File::create(output).with_context(|| format!("creating {}", output.display()))?;
     canvas

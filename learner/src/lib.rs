@@ -6,6 +6,7 @@ pub mod bench;
 pub mod error;
 pub mod gae;
 pub mod ppo;
+pub mod service;
 pub mod state;
 
 pub use amp::{style_reward_from_logit, AmpConfig, AmpStats, AmpTrainer, ReplayBuffer};

@@ -5,8 +5,8 @@ use candle_core::{DType, Tensor, Var};
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    rows_tensor, GaussianPolicy, GaussianPolicyConfig, MlpConfig, NetResult, RunningMeanStd,
-    SplitMix64, ValueNet,
+    rows_tensor, GaussianPolicy, GaussianPolicyConfig, MlpConfig, NetError, NetResult,
+    RunningMeanStd, SplitMix64, ValueNet,
 };
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -121,5 +121,58 @@ impl ActorCritic {
         let mut vars = self.policy.named_vars("policy");
         vars.extend(self.value.named_vars("value"));
         vars
+    }
+
+    /// Policy and value parameters as a safetensors file in memory (what the learner broadcasts;
+    /// a PyTorch user reads it with `safetensors.torch.load`).
+    pub fn weights_safetensors(&self) -> NetResult<Vec<u8>> {
+        let tensors: Vec<(String, Tensor)> = self
+            .named_vars()
+            .into_iter()
+            .map(|(n, v)| Ok((n, v.as_tensor().contiguous()?)))
+            .collect::<NetResult<_>>()?;
+        safetensors::serialize(tensors.iter().map(|(n, t)| (n.as_str(), t)), None)
+            .map_err(|e| NetError::Config(format!("cannot serialise weights: {e}")))
+    }
+
+    /// Loads parameters written by [`Self::weights_safetensors`] of a network with the same
+    /// layout. Every parameter must be present with its exact shape and dtype; nothing is changed
+    /// unless all of them are.
+    pub fn load_weights_safetensors(&self, bytes: &[u8]) -> NetResult<()> {
+        let bad = |what: String| NetError::Config(format!("policy weights: {what}"));
+        let file = safetensors::SafeTensors::deserialize(bytes)
+            .map_err(|e| bad(format!("not a safetensors file: {e}")))?;
+        let vars = self.named_vars();
+        let mut values = Vec::with_capacity(vars.len());
+        for (name, var) in &vars {
+            let view = file
+                .tensor(name)
+                .map_err(|_| bad(format!("tensor {name} is missing")))?;
+            if view.dtype() != safetensors::Dtype::F32 || view.shape() != var.dims() {
+                return Err(bad(format!(
+                    "tensor {name} is {:?} {:?}, expected F32 {:?}",
+                    view.dtype(),
+                    view.shape(),
+                    var.dims()
+                )));
+            }
+            let data: Vec<f32> = view
+                .data()
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect();
+            if data.iter().any(|x| !x.is_finite()) {
+                return Err(bad(format!("tensor {name} holds non-finite values")));
+            }
+            values.push(Tensor::from_vec(
+                data,
+                var.dims(),
+                &candle_core::Device::Cpu,
+            )?);
+        }
+        for ((_, var), value) in vars.iter().zip(values) {
+            var.set(&value)?;
+        }
+        Ok(())
     }
 }

@@ -83,8 +83,25 @@ impl Benchmark {
             .flat_map(|(s, f)| f.tasks.iter().map(move |t| (*s, t)))
     }
 
-    pub fn task(&self, id: &str) -> Option<(Split, &Task)> {
-        self.all_tasks().find(|(_, t)| t.id == id)
+    /// A task by id: a benchmark task, or one of its single-object tasks (`<id>.p<k>`, see
+    /// [`Task::single_pair`]).
+    pub fn task(&self, id: &str) -> Option<(Split, Task)> {
+        if let Some(found) = self.all_tasks().find(|(_, t)| t.id == id) {
+            return Some((found.0, found.1.clone()));
+        }
+        let (parent, k) = id.rsplit_once(".p")?;
+        let k: usize = k.parse().ok()?;
+        let (split, task) = self.all_tasks().find(|(_, t)| t.id == parent)?;
+        Some((split, task.single_pair(k.checked_sub(1)?)?))
+    }
+
+    /// Teacher 1's pretraining set: every task of `split` cut into one task per (object, goal)
+    /// pair (350 two-object training tasks → 700 single-object tasks).
+    pub fn single_object_tasks(&self, split: Split) -> Vec<Task> {
+        self.tasks(split)
+            .iter()
+            .flat_map(|t| (0..t.sequence.len()).filter_map(move |k| t.single_pair(k)))
+            .collect()
     }
 }
 

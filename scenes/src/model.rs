@@ -247,6 +247,17 @@ pub struct Task {
 }
 
 impl Task {
+    /// The same room with only the `k`-th (object, goal) pair to do, id `<id>.p<k+1>`. The other
+    /// objects stay where they start (they are clutter now). `None` if there is no such pair.
+    pub fn single_pair(&self, k: usize) -> Option<Task> {
+        let step = self.sequence.get(k)?.clone();
+        Some(Task {
+            id: format!("{}.p{}", self.id, k + 1),
+            sequence: vec![step],
+            ..self.clone()
+        })
+    }
+
     pub fn obstacle(&self, id: &str) -> Option<&Obstacle> {
         self.obstacles.iter().find(|o| o.id == id)
     }

@@ -139,3 +139,23 @@ fn stats_json_has_the_documented_keys() {
         Some(&0.into())
     );
 }
+
+#[test]
+fn training_tasks_split_into_700_single_object_tasks() {
+    let b = Benchmark::embedded().unwrap();
+    let singles = b.single_object_tasks(Split::Train);
+    assert_eq!(singles.len(), 700);
+    let parent = &b.tasks(Split::Train)[0];
+    let second = &singles[1];
+    assert_eq!(second.id, format!("{}.p2", parent.id));
+    assert_eq!(second.sequence, vec![parent.sequence[1].clone()]);
+    // The room and every object stay: the other object is clutter now.
+    assert_eq!(second.objects, parent.objects);
+    assert_eq!(second.obstacles, parent.obstacles);
+    // Ids of single-object tasks resolve like any other task id.
+    let (split, found) = b.task(&second.id).unwrap();
+    assert_eq!(split, Split::Train);
+    assert_eq!(&found, second);
+    assert!(b.task(&format!("{}.p3", parent.id)).is_none());
+    assert!(b.task(&format!("{}.p0", parent.id)).is_none());
+}

@@ -323,6 +323,18 @@ impl TaskEnv {
         rewards::power_penalty(&torques, &velocities)
     }
 
+    /// Placement error (m) of every pair attempted so far: the handed-off pairs' errors at their
+    /// handoff, then the current pair's error now (an episode cut short still reports it).
+    pub fn placement_errors(&self) -> Vec<f32> {
+        let mut out: Vec<f32> = self.cycles.results.iter().map(|r| r.dist).collect();
+        if !self.cycles.done() {
+            if let Some((i, goal, _)) = self.current() {
+                out.push(placement_error(self.object_state(i).pos, goal));
+            }
+        }
+        out
+    }
+
     pub fn snapshot(&self) -> EnvSnapshot {
         EnvSnapshot {
             world: self.world.snapshot(),

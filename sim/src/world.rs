@@ -7,7 +7,8 @@ use crate::room::{build_room, Room};
 use lhm_scenes::{Catalogue, Task};
 use rapier3d::prelude::*;
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct SimConfig {
     /// Policy rate.
     pub control_hz: f32,

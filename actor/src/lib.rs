@@ -1,0 +1,9 @@
+//! The stateless actor: [`rollout`] turns a policy and a batch of environments into fixed-length
+//! trajectory chunks (no networking, so it is testable and benchmarkable alone); [`service`] puts
+//! it on Zenoh — weights in, chunks out, a liveliness token, a clean stop on SIGTERM.
+
+pub mod rollout;
+pub mod service;
+
+pub use rollout::{Rollout, RolloutError};
+pub use service::{run_actor, ActorConfig, ActorSummary};

@@ -1,0 +1,294 @@
+//! Stepping a batch of task environments with one policy and cutting the experience into
+//! `TrajectoryChunk`s of `chunk_steps` steps per environment.
+//!
+//! Environments step in lock-step, so every environment's chunk completes on the same step and
+//! the actor can swap weights between chunks without ever mixing two policy versions in one
+//! chunk. An episode that ends (fall, success of every pair, time limit) is replaced by a fresh
+//! environment on a newly drawn task inside the same chunk; `dones`/`truncated` mark the seam.
+//! A step on which the physics guard tripped poisons its environment's chunk: that chunk is
+//! never sent, so its data can never reach an update.
+
+use lhm_nets::{ActorCritic, SplitMix64};
+use lhm_protos::{EpisodeStats, Role, TrajectoryChunk, WireMessage};
+use lhm_scenes::{Benchmark, Catalogue, Task};
+use lhm_sim::env::TaskEnv;
+use lhm_sim::CharacterModel;
+
+use lhm_cluster::RunSpec;
+
+#[derive(Debug, thiserror::Error)]
+pub enum RolloutError {
+    #[error("run spec: {0}")]
+    Spec(String),
+    #[error(transparent)]
+    Net(#[from] lhm_nets::NetError),
+}
+
+/// Per-environment chunk buffers.
+#[derive(Default)]
+struct ChunkBuf {
+    observations: Vec<f32>,
+    actions: Vec<f32>,
+    log_probs: Vec<f32>,
+    values: Vec<f32>,
+    rewards: Vec<f32>,
+    dones: Vec<bool>,
+    truncated: Vec<bool>,
+    truncation_values: Vec<f32>,
+    amp_features: Vec<f32>,
+    episodes: Vec<EpisodeStats>,
+    poisoned: bool,
+}
+
+struct Slot {
+    env: TaskEnv,
+    obs: Vec<f32>,
+    episode_return: f32,
+    episode_len: u32,
+    buf: ChunkBuf,
+}
+
+/// What one call to [`Rollout::step`] finished.
+#[derive(Default)]
+pub struct StepOutput {
+    /// Complete chunks (one per environment whose chunk is full and clean).
+    pub chunks: Vec<TrajectoryChunk>,
+    /// Chunks thrown away because the physics guard tripped inside them.
+    pub poisoned_chunks: u64,
+    /// Episodes that ended on this step.
+    pub finished: Vec<(usize, EpisodeStats)>,
+}
+
+pub struct Rollout {
+    pub spec: RunSpec,
+    model: CharacterModel,
+    catalogue: Catalogue,
+    tasks: Vec<Task>,
+    slots: Vec<Slot>,
+    rng: SplitMix64,
+    run_id: String,
+    actor_id: String,
+    role: Role,
+    chunk_seq: u64,
+    pub env_steps: u64,
+}
+
+impl Rollout {
+    pub fn new(
+        spec: RunSpec,
+        bench: &Benchmark,
+        run_id: &str,
+        actor_id: &str,
+        role: Role,
+        num_envs: usize,
+        seed: u64,
+    ) -> Result<Self, RolloutError> {
+        let model = CharacterModel::amp_humanoid();
+        let tasks = spec.tasks.resolve(bench).map_err(RolloutError::Spec)?;
+        let obs_dim = TaskEnv::obs_dim(&model, &spec.env);
+        let amp_dim = TaskEnv::amp_dim(&model, &spec.env);
+        if obs_dim != spec.obs_dim {
+            return Err(RolloutError::Spec(format!(
+                "the learner's policy takes {} observations, this actor's environment gives {obs_dim}",
+                spec.obs_dim
+            )));
+        }
+        if spec.amp_dim != 0 && spec.amp_dim != amp_dim {
+            return Err(RolloutError::Spec(format!(
+                "the learner expects {} AMP features, this actor's environment gives {amp_dim}",
+                spec.amp_dim
+            )));
+        }
+        if spec.act_dim != model.dofs.len() {
+            return Err(RolloutError::Spec(format!(
+                "the learner's policy gives {} actions, the character has {} DoF",
+                spec.act_dim,
+                model.dofs.len()
+            )));
+        }
+        if spec.chunk_steps == 0 {
+            return Err(RolloutError::Spec("chunk_steps must be > 0".into()));
+        }
+        let mut rollout = Self {
+            model,
+            catalogue: bench.catalogue.clone(),
+            tasks,
+            slots: Vec::new(),
+            rng: SplitMix64::new(seed),
+            run_id: run_id.to_owned(),
+            actor_id: actor_id.to_owned(),
+            role,
+            chunk_seq: 0,
+            env_steps: 0,
+            spec,
+        };
+        for _ in 0..num_envs.max(1) {
+            let env = rollout.fresh_env();
+            let obs = env.observation();
+            rollout.slots.push(Slot {
+                env,
+                obs,
+                episode_return: 0.0,
+                episode_len: 0,
+                buf: ChunkBuf::default(),
+            });
+        }
+        Ok(rollout)
+    }
+
+    pub fn num_envs(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// An environment on a task drawn uniformly from the task set.
+    fn fresh_env(&mut self) -> TaskEnv {
+        let task = &self.tasks[self.rng.below(self.tasks.len())];
+        TaskEnv::new(
+            &self.model,
+            task,
+            &self.catalogue,
+            self.spec.sim.clone(),
+            self.spec.env.clone(),
+        )
+    }
+
+    /// The environment `i` (e.g. to capture its poses for recording).
+    pub fn env(&self, i: usize) -> &TaskEnv {
+        &self.slots[i].env
+    }
+
+    /// Whether the next step starts new chunks (the moment to swap weights).
+    pub fn at_chunk_boundary(&self) -> bool {
+        self.slots.iter().all(|s| s.buf.rewards.is_empty())
+    }
+
+    /// Replaces the run spec (new weights from a learner with other settings take effect at the
+    /// next chunk boundary; environments already running keep going).
+    pub fn set_spec(&mut self, spec: RunSpec) {
+        self.spec = spec;
+    }
+
+    /// One control step of every environment with `ac` (policy version `version`).
+    pub fn step(&mut self, ac: &ActorCritic, version: u64) -> Result<StepOutput, RolloutError> {
+        let obs: Vec<f32> = self.slots.iter().flat_map(|s| s.obs.clone()).collect();
+        let act = ac.act(&obs, &mut self.rng)?;
+        let act_dim = self.spec.act_dim;
+        let mut out = StepOutput::default();
+        // Environments whose episode ended by time limit need V(final observation).
+        let mut truncated_obs: Vec<(usize, Vec<f32>)> = Vec::new();
+        for i in 0..self.slots.len() {
+            let action = &act.actions[i * act_dim..(i + 1) * act_dim];
+            let slot = &mut self.slots[i];
+            let result = slot.env.step(action);
+            self.env_steps += 1;
+            slot.episode_len += 1;
+            slot.episode_return += result.reward;
+            let buf = &mut slot.buf;
+            buf.observations.extend_from_slice(&slot.obs);
+            buf.actions.extend_from_slice(action);
+            buf.log_probs.push(act.log_probs[i]);
+            buf.values.push(act.values[i]);
+            buf.rewards.push(result.reward);
+            buf.dones.push(result.done && !result.physics_invalid);
+            buf.truncated
+                .push(result.truncated || result.physics_invalid);
+            buf.truncation_values.push(0.0);
+            if self.spec.amp_dim > 0 {
+                let features = slot.env.amp_features();
+                buf.amp_features.extend_from_slice(&features);
+            }
+            if result.physics_invalid {
+                buf.poisoned = true;
+            }
+            let ended = result.done || result.truncated || result.physics_invalid;
+            if ended {
+                let cycles = &slot.env.cycles;
+                let errors = slot.env.placement_errors();
+                let stats = EpisodeStats {
+                    episode_return: slot.episode_return,
+                    length: slot.episode_len,
+                    cycles_attempted: errors.len() as u32,
+                    cycles_succeeded: cycles.results.iter().filter(|r| r.success).count() as u32,
+                    final_placement_error_m: errors,
+                    fell: result.fell,
+                    physics_invalid: result.physics_invalid,
+                    task_id: slot.env.task.id.clone(),
+                };
+                if result.truncated && !result.physics_invalid {
+                    truncated_obs.push((i, slot.env.observation()));
+                }
+                slot.buf.episodes.push(stats.clone());
+                out.finished.push((i, stats));
+            } else {
+                slot.obs = slot.env.observation();
+            }
+        }
+        if !truncated_obs.is_empty() {
+            let rows: Vec<f32> = truncated_obs.iter().flat_map(|(_, o)| o.clone()).collect();
+            let values = ac.values(&rows)?;
+            for ((i, _), v) in truncated_obs.iter().zip(values) {
+                if let Some(last) = self.slots[*i].buf.truncation_values.last_mut() {
+                    *last = v;
+                }
+            }
+        }
+        // New episodes for the environments that ended.
+        let ended: Vec<usize> = out.finished.iter().map(|(i, _)| *i).collect();
+        for i in ended {
+            let env = self.fresh_env();
+            let slot = &mut self.slots[i];
+            slot.obs = env.observation();
+            slot.env = env;
+            slot.episode_return = 0.0;
+            slot.episode_len = 0;
+        }
+        if self.slots[0].buf.rewards.len() >= self.spec.chunk_steps as usize {
+            self.emit_chunks(ac, version, &mut out)?;
+        }
+        Ok(out)
+    }
+
+    fn emit_chunks(
+        &mut self,
+        ac: &ActorCritic,
+        version: u64,
+        out: &mut StepOutput,
+    ) -> Result<(), RolloutError> {
+        let obs: Vec<f32> = self.slots.iter().flat_map(|s| s.obs.clone()).collect();
+        let bootstrap = ac.values(&obs)?;
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            let buf = std::mem::take(&mut slot.buf);
+            self.chunk_seq += 1;
+            if buf.poisoned {
+                out.poisoned_chunks += 1;
+                continue;
+            }
+            let num_steps = buf.rewards.len() as u32;
+            out.chunks.push(TrajectoryChunk {
+                run_id: self.run_id.clone(),
+                actor_id: self.actor_id.clone(),
+                role: self.role as i32,
+                policy_version: version,
+                chunk_seq: self.chunk_seq,
+                env_index: i as u32,
+                num_steps,
+                obs_dim: self.spec.obs_dim as u32,
+                act_dim: self.spec.act_dim as u32,
+                amp_dim: self.spec.amp_dim as u32,
+                observations: buf.observations,
+                actions: buf.actions,
+                log_probs: buf.log_probs,
+                values: buf.values,
+                rewards: buf.rewards,
+                dones: buf.dones,
+                truncated: buf.truncated,
+                truncation_values: buf.truncation_values,
+                amp_features: buf.amp_features,
+                bootstrap_value: bootstrap[i],
+                episodes: buf.episodes,
+                ..TrajectoryChunk::versioned()
+            });
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,252 @@
+//! The actor process: connect, fetch the latest weights, simulate, publish chunks, swap weights
+//! between chunks, stop cleanly on SIGTERM.
+
+use std::time::{Duration, Instant};
+
+use lhm_cluster::session::open_session_retrying;
+use lhm_cluster::{decode_policy, shutdown, ClusterError, Endpoints, NodeMode, ReceivedPolicy};
+use lhm_protos::{keys, Metrics, Role, WireMessage};
+use lhm_scenes::Benchmark;
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::Wait;
+
+use crate::rollout::{Rollout, RolloutError};
+
+#[derive(Debug, Clone)]
+pub struct ActorConfig {
+    pub endpoints: Endpoints,
+    pub run_id: String,
+    pub role: Role,
+    /// Unique among the run's processes; default `actor-<host>-<pid>`.
+    pub actor_id: String,
+    pub envs: usize,
+    pub seed: u64,
+    /// Stop after this many chunks sent (benchmarks, tests); `None`: until SIGTERM.
+    pub max_chunks: Option<u64>,
+    /// Build chunks but do not put them (the benchmark's no-publishing baseline).
+    pub publish: bool,
+}
+
+impl ActorConfig {
+    pub fn default_actor_id() -> String {
+        let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .map(|h| h.trim().to_owned())
+            .unwrap_or_else(|_| "host".into());
+        let host: String = host
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        format!("actor-{host}-{}", std::process::id())
+    }
+}
+
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ActorSummary {
+    pub chunks_sent: u64,
+    pub env_steps: u64,
+    pub poisoned_chunks: u64,
+    pub policy_swaps: u64,
+    pub last_version: u64,
+    /// Seconds spent simulating and acting (excludes waiting for the first weights).
+    pub busy_s: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ActorError {
+    #[error(transparent)]
+    Cluster(#[from] ClusterError),
+    #[error(transparent)]
+    Rollout(#[from] RolloutError),
+    #[error("benchmark scenes: {0}")]
+    Scenes(String),
+    #[error("stopped before any weights arrived")]
+    NoWeights,
+}
+
+fn zerr(e: impl std::fmt::Display) -> ClusterError {
+    ClusterError::zenoh(e)
+}
+
+/// Asks the learner's queryable for the latest weights (`None` if nobody answered in time).
+fn query_latest(
+    session: &zenoh::Session,
+    key: &str,
+) -> Result<Option<ReceivedPolicy>, ClusterError> {
+    let replies = session
+        .get(key)
+        .timeout(Duration::from_secs(3))
+        .wait()
+        .map_err(zerr)?;
+    let mut newest: Option<ReceivedPolicy> = None;
+    while let Ok(reply) = replies.recv() {
+        let Ok(sample) = reply.result() else { continue };
+        match decode_policy(&sample.payload().to_bytes()) {
+            Ok(p) if newest.as_ref().is_none_or(|n| p.version > n.version) => newest = Some(p),
+            Ok(_) => {}
+            Err(e) => tracing::warn!("ignoring a weights reply: {e}"),
+        }
+    }
+    Ok(newest)
+}
+
+pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
+    keys::check_chunk("run id", &config.run_id).map_err(ClusterError::from)?;
+    keys::check_chunk("actor id", &config.actor_id).map_err(ClusterError::from)?;
+    let bench = Benchmark::embedded().map_err(|e| ActorError::Scenes(e.to_string()))?;
+    let session = open_session_retrying(
+        NodeMode::Client,
+        &config.endpoints,
+        Duration::from_millis(500),
+        || !shutdown::requested(),
+    )?;
+    let token = session
+        .liveliness()
+        .declare_token(keys::status(&config.run_id, &config.actor_id))
+        .wait()
+        .map_err(zerr)?;
+    let policy_key = keys::policy(&config.run_id, config.role);
+    let weights_sub = session
+        .declare_subscriber(&policy_key)
+        .wait()
+        .map_err(zerr)?;
+    tracing::info!(
+        "actor {} waiting for {} weights",
+        config.actor_id,
+        keys::role_chunk(config.role)
+    );
+    let mut policy = loop {
+        if shutdown::requested() {
+            return Err(ActorError::NoWeights);
+        }
+        if let Ok(Some(sample)) = weights_sub.try_recv() {
+            match decode_policy(&sample.payload().to_bytes()) {
+                Ok(p) => break p,
+                Err(e) => tracing::warn!("ignoring weights: {e}"),
+            }
+        }
+        if let Some(p) = query_latest(&session, &policy_key)? {
+            break p;
+        }
+    };
+    tracing::info!(
+        "actor {}: policy version {}, {} envs",
+        config.actor_id,
+        policy.version,
+        config.envs
+    );
+    let mut rollout = Rollout::new(
+        policy.spec.clone(),
+        &bench,
+        &config.run_id,
+        &config.actor_id,
+        config.role,
+        config.envs,
+        config.seed,
+    )?;
+    let traj = session
+        .declare_publisher(keys::trajectory(
+            &config.run_id,
+            config.role,
+            &config.actor_id,
+        ))
+        .congestion_control(CongestionControl::Block)
+        .priority(Priority::Data)
+        .wait()
+        .map_err(zerr)?;
+    let metrics_key = keys::metrics(&config.run_id, &config.actor_id);
+    let mut summary = ActorSummary {
+        last_version: policy.version,
+        ..ActorSummary::default()
+    };
+    let started = Instant::now();
+    let mut last_metrics = Instant::now();
+    let mut steps_at_metrics = 0u64;
+    loop {
+        // A stop request between steps drops the unfinished chunk: nothing partial is sent.
+        if shutdown::requested() {
+            break;
+        }
+        if config.max_chunks.is_some_and(|m| summary.chunks_sent >= m) {
+            break;
+        }
+        if rollout.at_chunk_boundary() {
+            let mut newest = None;
+            while let Ok(Some(sample)) = weights_sub.try_recv() {
+                newest = Some(sample);
+            }
+            if let Some(sample) = newest {
+                match decode_policy(&sample.payload().to_bytes()) {
+                    Ok(p) if p.version != policy.version => {
+                        if p.spec != policy.spec {
+                            rollout.set_spec(p.spec.clone());
+                        }
+                        policy = p;
+                        summary.policy_swaps += 1;
+                        summary.last_version = policy.version;
+                    }
+                    Ok(_) => {}
+                    Err(e) => tracing::warn!("ignoring weights: {e}"),
+                }
+            }
+        }
+        let out = rollout.step(&policy.actor_critic, policy.version)?;
+        summary.poisoned_chunks += out.poisoned_chunks;
+        for chunk in out.chunks {
+            if config.publish {
+                let bytes = chunk.encode_checked().map_err(ClusterError::from)?;
+                traj.put(bytes).wait().map_err(zerr)?;
+            }
+            summary.chunks_sent += 1;
+        }
+        if last_metrics.elapsed() >= Duration::from_secs(5) {
+            let dt = last_metrics.elapsed().as_secs_f64();
+            let mut m = Metrics {
+                run_id: config.run_id.clone(),
+                process: config.actor_id.clone(),
+                unix_time_ms: unix_ms(),
+                iteration: policy.version,
+                ..Metrics::versioned()
+            };
+            m.values.insert(
+                "env_steps_per_s".into(),
+                (rollout.env_steps - steps_at_metrics) as f64 / dt,
+            );
+            m.values
+                .insert("chunks_sent".into(), summary.chunks_sent as f64);
+            if let Ok(bytes) = m.encode_checked() {
+                // Telemetry may be dropped under congestion; training data may not.
+                let _ = session
+                    .put(&metrics_key, bytes)
+                    .congestion_control(CongestionControl::Drop)
+                    .priority(Priority::DataLow)
+                    .wait();
+            }
+            steps_at_metrics = rollout.env_steps;
+            last_metrics = Instant::now();
+        }
+    }
+    summary.env_steps = rollout.env_steps;
+    summary.busy_s = started.elapsed().as_secs_f64();
+    drop(traj);
+    let _ = token.undeclare().wait();
+    let _ = session.close().wait();
+    tracing::info!(
+        "actor {} stopped: {} chunks sent, {} env steps",
+        config.actor_id,
+        summary.chunks_sent,
+        summary.env_steps
+    );
+    Ok(summary)
+}
+
+pub fn unix_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}

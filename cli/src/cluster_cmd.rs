@@ -1,0 +1,315 @@
+//! `lhm train`, `lhm learner`, `lhm actor`: the distributed actor–learner run. `lhm train` is the
+//! embedded default — the learner in this process on loopback and K actor processes it starts
+//! itself — and gives the same run as the separate commands across machines.
+
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use lhm_actor::{run_actor, ActorConfig};
+use lhm_cluster::{shutdown, Endpoints};
+use lhm_learner::service::{run_learner, DemoSource, Hooks, IterationReport, TrainConfig};
+use lhm_protos::keys;
+
+#[derive(Args, Clone)]
+pub struct LearnerOpts {
+    /// Training configuration (TOML; every field optional). Default: the built-in Teacher 1 run.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Run id (overrides the config's).
+    #[arg(long)]
+    run_id: Option<String>,
+    /// Directory of runs (overrides the config's; default `runs`).
+    #[arg(long)]
+    runs_dir: Option<PathBuf>,
+    /// Stop after this many iterations (overrides the config's).
+    #[arg(long)]
+    max_iterations: Option<u64>,
+    /// Transitions per update (overrides the config's).
+    #[arg(long)]
+    batch_steps: Option<usize>,
+    /// Train with the task reward only (no AMP discriminator, no motion clips needed).
+    #[arg(long)]
+    no_amp: bool,
+    /// Where `scripts/install-motions` put the clips (default: $LHM_MOTION_DIR or ~/.cache/lhm/motions).
+    #[arg(long)]
+    motion_dir: Option<PathBuf>,
+    /// A Zenoh JSON5 configuration (TLS, authentication); explicit endpoints override its own.
+    #[arg(long)]
+    zenoh_config: Option<PathBuf>,
+}
+
+impl LearnerOpts {
+    fn train_config(&self) -> Result<TrainConfig> {
+        let mut config = match &self.config {
+            Some(path) => TrainConfig::from_toml_file(path)?,
+            None => TrainConfig::default(),
+        };
+        if let Some(id) = &self.run_id {
+            config.run_id = id.clone();
+        }
+        if let Some(dir) = &self.runs_dir {
+            config.runs_dir = dir.clone();
+        }
+        if let Some(n) = self.max_iterations {
+            config.max_iterations = Some(n);
+        }
+        if let Some(n) = self.batch_steps {
+            config.batch_steps = n;
+        }
+        if self.no_amp {
+            config.amp = None;
+        }
+        keys::check_chunk("run id", &config.run_id)?;
+        Ok(config)
+    }
+
+    fn demo(&self, config: &TrainConfig) -> Result<Option<Box<dyn DemoSource>>> {
+        if config.amp.is_none() {
+            return Ok(None);
+        }
+        crate::demo::load(self.motion_dir.clone(), config).map(Some)
+    }
+}
+
+#[derive(Args)]
+pub struct TrainArgs {
+    #[command(flatten)]
+    learner: LearnerOpts,
+    /// Actor processes to start (default: one per CPU core).
+    #[arg(long)]
+    actors: Option<usize>,
+    /// Environments per actor process.
+    #[arg(long, default_value_t = 16)]
+    envs: usize,
+    /// Loopback port the learner listens on (0: any free port).
+    #[arg(long, default_value_t = 0)]
+    port: u16,
+}
+
+#[derive(Args)]
+pub struct LearnerArgs {
+    #[command(flatten)]
+    learner: LearnerOpts,
+    /// Endpoints to listen on.
+    #[arg(long, default_value = "tcp/0.0.0.0:7447")]
+    listen: Vec<String>,
+}
+
+#[derive(Args)]
+pub struct ActorArgs {
+    /// The learner's (or a router's) endpoint, e.g. tcp/10.0.0.5:7447.
+    #[arg(long, required = true)]
+    connect: Vec<String>,
+    #[arg(long, default_value = "teacher1")]
+    run_id: String,
+    /// teacher1, teacher2 or student.
+    #[arg(long, default_value = "teacher1")]
+    role: String,
+    /// Environments stepped by this process.
+    #[arg(long, default_value_t = 16)]
+    envs: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Default: actor-<host>-<pid>.
+    #[arg(long)]
+    actor_id: Option<String>,
+    /// Stop after sending this many chunks.
+    #[arg(long)]
+    max_chunks: Option<u64>,
+    #[arg(long)]
+    zenoh_config: Option<PathBuf>,
+}
+
+fn progress_bar(max: Option<u64>) -> ProgressBar {
+    let bar = match max {
+        Some(n) => ProgressBar::new(n).with_style(
+            ProgressStyle::with_template("{bar:30} it {pos}/{len} {msg} [{elapsed_precise}]")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        ),
+        None => ProgressBar::new_spinner().with_style(
+            ProgressStyle::with_template("{spinner} it {pos} {msg} [{elapsed_precise}]")
+                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        ),
+    };
+    bar.enable_steady_tick(Duration::from_millis(250));
+    bar.set_message("waiting for the first batch");
+    bar
+}
+
+fn progress_message(r: &IterationReport) -> String {
+    let success = if r.success_rate.is_finite() {
+        format!("{:.1}%", 100.0 * r.success_rate)
+    } else {
+        "-".into()
+    };
+    format!(
+        "| {:.0} samples/s | return {:.2} | success {success} | {} episodes | {} actors",
+        r.samples_per_s, r.mean_return, r.episodes, r.actors_alive
+    )
+}
+
+fn run_with_progress(
+    config: &TrainConfig,
+    endpoints: &Endpoints,
+    demo: Option<Box<dyn DemoSource>>,
+    mut on_listening: impl FnMut(),
+) -> Result<()> {
+    let bar = progress_bar(config.max_iterations);
+    let bar_for_hook = bar.clone();
+    let hooks = Hooks {
+        on_iteration: Some(Box::new(move |r: &IterationReport| {
+            bar_for_hook.set_position(r.iteration);
+            bar_for_hook.set_message(progress_message(r));
+        })),
+        on_listening: Some(Box::new(&mut on_listening)),
+    };
+    let status = run_learner(config, endpoints, demo, hooks);
+    bar.finish();
+    let status = status?;
+    println!(
+        "run {}: iteration {}, {} samples; checkpoint and status in {}",
+        status.run_id,
+        status.iteration,
+        status.samples,
+        config.run_dir().display()
+    );
+    Ok(())
+}
+
+pub fn train(args: TrainArgs) -> Result<()> {
+    shutdown::install();
+    let config = args.learner.train_config()?;
+    let demo = args.learner.demo(&config)?;
+    let port = match args.port {
+        0 => std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .context("finding a free loopback port")?
+            .port(),
+        p => p,
+    };
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let endpoints = Endpoints {
+        listen: vec![endpoint.clone()],
+        connect: vec![],
+        zenoh_config: args.learner.zenoh_config.clone(),
+    };
+    let actors = args
+        .actors
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
+        .max(1);
+    let exe = std::env::current_exe().context("locating the lhm executable")?;
+    let run_dir = config.run_dir();
+    std::fs::create_dir_all(&run_dir).with_context(|| format!("creating {}", run_dir.display()))?;
+    let mut children: Vec<Child> = Vec::new();
+    let mut spawn_error: Option<anyhow::Error> = None;
+    let role = config.role.clone();
+    let run_id = config.run_id.clone();
+    let result = run_with_progress(&config, &endpoints, demo, || {
+        for i in 0..actors {
+            let log = run_dir.join(format!("actor-{i}.log"));
+            let spawned = std::fs::File::create(&log)
+                .with_context(|| format!("creating {}", log.display()))
+                .and_then(|file| {
+                    let err = file.try_clone()?;
+                    Command::new(&exe)
+                        .args(["actor", "--connect", &endpoint, "--run-id", &run_id])
+                        .args(["--role", &role, "--envs", &args.envs.to_string()])
+                        .args(["--seed", &(1000 + i as u64).to_string()])
+                        .args(["--actor-id", &format!("local-{i}")])
+                        .stdin(Stdio::null())
+                        .stdout(file)
+                        .stderr(err)
+                        .spawn()
+                        .context("starting an actor process")
+                });
+            match spawned {
+                Ok(child) => children.push(child),
+                Err(e) => {
+                    spawn_error = Some(e);
+                    shutdown::request();
+                    break;
+                }
+            }
+        }
+    });
+    stop_children(&mut children);
+    if let Some(e) = spawn_error {
+        return Err(e);
+    }
+    result
+}
+
+/// SIGTERM to every actor (they finish their step and leave without a partial chunk), then
+/// SIGKILL whoever is still there after a grace period.
+fn stop_children(children: &mut [Child]) {
+    for child in children.iter() {
+        // SAFETY: plain kill(2) on a child we spawned.
+        unsafe {
+            libc::kill(child.id() as libc::pid_t, libc::SIGTERM);
+        }
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    for child in children.iter_mut() {
+        loop {
+            match child.try_wait() {
+                Ok(Some(_)) => break,
+                Ok(None) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(50))
+                }
+                _ => {
+                    let _ = child.kill();
+                    let _ = child.wait();
+                    break;
+                }
+            }
+        }
+    }
+}
+
+pub fn learner(args: LearnerArgs) -> Result<()> {
+    shutdown::install();
+    let config = args.learner.train_config()?;
+    let demo = args.learner.demo(&config)?;
+    let endpoints = Endpoints {
+        listen: args.listen.clone(),
+        connect: vec![],
+        zenoh_config: args.learner.zenoh_config.clone(),
+    };
+    run_with_progress(&config, &endpoints, demo, || {})
+}
+
+pub fn actor(args: ActorArgs) -> Result<()> {
+    shutdown::install();
+    let Some(role) = keys::parse_role(&args.role) else {
+        bail!(
+            "--role {:?} is not one of teacher1, teacher2, student",
+            args.role
+        );
+    };
+    let config = ActorConfig {
+        endpoints: Endpoints {
+            listen: vec![],
+            connect: args.connect,
+            zenoh_config: args.zenoh_config,
+        },
+        run_id: args.run_id,
+        role,
+        actor_id: args.actor_id.unwrap_or_else(ActorConfig::default_actor_id),
+        envs: args.envs.max(1),
+        seed: args.seed,
+        max_chunks: args.max_chunks,
+        publish: true,
+    };
+    match run_actor(&config) {
+        Ok(summary) => {
+            tracing::info!("{summary:?}");
+            Ok(())
+        }
+        Err(lhm_actor::service::ActorError::NoWeights) if shutdown::requested() => Ok(()),
+        Err(e) => Err(e.into()),
+    }
+}

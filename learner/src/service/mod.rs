@@ -1,0 +1,581 @@
+//! The learner service: listens, takes trajectory chunks from whoever is alive, runs PPO (+AMP)
+//! updates on on-policy batches, publishes weights (never dropped), answers `latest` queries,
+//! checkpoints every N iterations and on SIGTERM, and resumes from its checkpoint.
+
+pub mod batch;
+pub mod intake;
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use lhm_cluster::{encode_policy, shutdown, Endpoints, NodeMode, RunSpec, TaskSet};
+use lhm_nets::ActorCriticConfig;
+use lhm_protos::{keys, Metrics, Role, TrajectoryChunk, WireMessage};
+use lhm_sim::env::{EnvConfig, TaskEnv};
+use lhm_sim::{CharacterModel, SimConfig};
+use serde::{Deserialize, Serialize};
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::sample::SampleKind;
+use zenoh::Wait;
+
+use crate::amp::AmpConfig;
+use crate::gae::GaeParams;
+use crate::ppo::PpoConfig;
+use crate::state::{AmpSetup, Learner, LearnerConfig};
+use batch::{assemble, EpisodeSummary};
+use intake::{admit, Intake, IntakeCounters};
+
+/// Everything a training run is, as one TOML file (every field has a default).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    pub run_id: String,
+    /// `teacher1`, `teacher2`, `student`.
+    pub role: String,
+    /// Runs live in `<runs_dir>/<run_id>/` (checkpoint, status.json, run.mcap).
+    pub runs_dir: PathBuf,
+    /// Transitions per PPO update.
+    pub batch_steps: usize,
+    /// Chunks made with a policy more than this many versions old are dropped.
+    pub max_policy_lag: u64,
+    /// Checkpoint every this many iterations (and on SIGTERM / at the end).
+    pub checkpoint_every: u64,
+    /// Stop after this many iterations in total (`None`: until stopped).
+    pub max_iterations: Option<u64>,
+    pub network: ActorCriticConfig,
+    pub ppo: PpoConfig,
+    /// `None`: PPO on the task reward only.
+    pub amp: Option<AmpConfig>,
+    pub env: EnvConfig,
+    pub sim: SimConfig,
+    pub tasks: TaskSet,
+    pub chunk_steps: u32,
+    pub record_every_episodes: u32,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        // CPU-sized defaults (the laptop path): 512-256 networks, 4096-step batches.
+        let mut ppo = PpoConfig::default();
+        ppo.minibatch_size = 1024;
+        ppo.epochs = 4;
+        ppo.adam.lr = 5e-5;
+        let mut amp = AmpConfig::default();
+        amp.disc.hidden = vec![512, 256];
+        amp.minibatch_size = 1024;
+        Self {
+            run_id: "teacher1".into(),
+            role: "teacher1".into(),
+            runs_dir: PathBuf::from("runs"),
+            batch_steps: 4096,
+            max_policy_lag: 1,
+            checkpoint_every: 10,
+            max_iterations: None,
+            network: ActorCriticConfig::with_hidden(&[512, 256]),
+            ppo,
+            amp: Some(amp),
+            env: EnvConfig::default(),
+            sim: SimConfig::default(),
+            tasks: TaskSet::TrainSingleObject,
+            chunk_steps: 32,
+            record_every_episodes: 20,
+        }
+    }
+}
+
+impl TrainConfig {
+    pub fn role(&self) -> Result<Role, ServiceError> {
+        keys::parse_role(&self.role).ok_or_else(|| {
+            ServiceError::Config(format!(
+                "role {:?} is not one of teacher1, teacher2, student",
+                self.role
+            ))
+        })
+    }
+
+    pub fn run_dir(&self) -> PathBuf {
+        self.runs_dir.join(&self.run_id)
+    }
+
+    /// What actors receive with the weights.
+    pub fn run_spec(&self) -> RunSpec {
+        let model = CharacterModel::amp_humanoid();
+        RunSpec {
+            obs_dim: TaskEnv::obs_dim(&model, &self.env),
+            act_dim: model.dofs.len(),
+            amp_dim: if self.amp.is_some() {
+                TaskEnv::amp_dim(&model, &self.env)
+            } else {
+                0
+            },
+            actor_critic: self.network.clone(),
+            env: self.env.clone(),
+            sim: self.sim.clone(),
+            tasks: self.tasks.clone(),
+            chunk_steps: self.chunk_steps,
+            record_every_episodes: self.record_every_episodes,
+        }
+    }
+
+    pub fn learner_config(&self) -> LearnerConfig {
+        let spec = self.run_spec();
+        LearnerConfig {
+            obs_dim: spec.obs_dim,
+            act_dim: spec.act_dim,
+            actor_critic: self.network.clone(),
+            ppo: self.ppo.clone(),
+            amp: self.amp.clone().map(|config| AmpSetup {
+                feature_dim: spec.amp_dim,
+                config,
+            }),
+        }
+    }
+
+    /// Reads a TOML file; errors name the file and the field.
+    pub fn from_toml_file(path: &Path) -> Result<Self, ServiceError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
+        let de = toml::Deserializer::parse(&text)
+            .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
+        serde_path_to_error::deserialize(de).map_err(|e| {
+            ServiceError::Config(format!(
+                "{}: field `{}`: {}",
+                path.display(),
+                e.path(),
+                e.inner()
+            ))
+        })
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    #[error("config: {0}")]
+    Config(String),
+    #[error(transparent)]
+    Cluster(#[from] lhm_cluster::ClusterError),
+    #[error(transparent)]
+    Learner(#[from] crate::LearnerError),
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+fn zerr(e: impl std::fmt::Display) -> ServiceError {
+    ServiceError::Cluster(lhm_cluster::ClusterError::zenoh(e))
+}
+
+/// Demo AMP features (rows of the discriminator's width) for the discriminator's "real" side.
+pub trait DemoSource: Send {
+    fn sample(&mut self, rows: usize) -> Vec<f32>;
+}
+
+/// One finished iteration, for progress bars and logs.
+#[derive(Debug, Clone, Serialize)]
+pub struct IterationReport {
+    pub iteration: u64,
+    pub samples: u64,
+    pub samples_per_s: f64,
+    pub mean_return: f64,
+    pub success_rate: f64,
+    pub episodes: u64,
+    pub actors_alive: usize,
+    pub update_s: f64,
+}
+
+/// What `status.json` holds after every iteration (tests and people read it).
+#[derive(Debug, Clone, Serialize)]
+pub struct LearnerStatus {
+    pub run_id: String,
+    pub iteration: u64,
+    pub policy_version: u64,
+    pub samples: u64,
+    /// Transitions that went into updates (equals the accepted chunks' steps consumed).
+    pub steps_used: u64,
+    pub intake: IntakeCounters,
+    pub actors_alive: Vec<String>,
+    pub actors_seen: usize,
+    pub resumed_from_iteration: Option<u64>,
+    pub last: Option<IterationReport>,
+    pub episodes: Option<EpisodeSummaryJson>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct EpisodeSummaryJson {
+    pub episodes: u64,
+    pub mean_return: f64,
+    pub mean_length: f64,
+    pub success_rate: f64,
+    pub falls: u64,
+    pub mean_task_reward: f64,
+    pub mean_style_reward: f64,
+}
+
+impl From<&EpisodeSummary> for EpisodeSummaryJson {
+    fn from(s: &EpisodeSummary) -> Self {
+        Self {
+            episodes: s.episodes,
+            mean_return: s.mean_return,
+            mean_length: s.mean_length,
+            success_rate: s.success_rate,
+            falls: s.falls,
+            mean_task_reward: s.mean_task_reward,
+            mean_style_reward: s.mean_style_reward,
+        }
+    }
+}
+
+fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<(), ServiceError> {
+    let io = |source| ServiceError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let tmp = path.with_extension("json.tmp");
+    let text = serde_json::to_vec_pretty(value).unwrap_or_default();
+    std::fs::write(&tmp, text).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+/// The checkpoint stem of a run: `<run_dir>/checkpoint.{safetensors,json}`.
+pub fn checkpoint_stem(run_dir: &Path) -> PathBuf {
+    run_dir.join("checkpoint")
+}
+
+/// Optional hooks into a learner run (recording, progress).
+#[derive(Default)]
+pub struct Hooks<'a> {
+    pub on_iteration: Option<Box<dyn FnMut(&IterationReport) + 'a>>,
+    /// Called once the session is up and listening (e.g. to start local actors).
+    pub on_listening: Option<Box<dyn FnMut() + 'a>>,
+}
+
+/// Runs the learner until `max_iterations` or a stop request; returns the final status.
+pub fn run_learner(
+    config: &TrainConfig,
+    endpoints: &Endpoints,
+    mut demo: Option<Box<dyn DemoSource>>,
+    mut hooks: Hooks<'_>,
+) -> Result<LearnerStatus, ServiceError> {
+    let role = config.role()?;
+    keys::check_chunk("run id", &config.run_id).map_err(lhm_cluster::ClusterError::from)?;
+    if config.amp.is_some() && demo.is_none() {
+        return Err(ServiceError::Config(
+            "AMP is on but no demo motion was given (install clips with scripts/install-motions, \
+             or train without AMP)"
+                .into(),
+        ));
+    }
+    let run_dir = config.run_dir();
+    std::fs::create_dir_all(&run_dir).map_err(|source| ServiceError::Io {
+        path: run_dir.clone(),
+        source,
+    })?;
+    let stem = checkpoint_stem(&run_dir);
+    let learner_config = config.learner_config();
+    let (mut learner, resumed) = if stem.with_extension("json").is_file() {
+        let l = Learner::load(&stem, Some(&learner_config))?;
+        tracing::info!(
+            "resuming {} from iteration {}",
+            stem.display(),
+            l.counters.iteration
+        );
+        let it = l.counters.iteration;
+        (l, Some(it))
+    } else {
+        (Learner::new(learner_config)?, None)
+    };
+    let spec = config.run_spec();
+
+    let session = lhm_cluster::open_session(NodeMode::Router, endpoints)?;
+    let policy_key = keys::policy(&config.run_id, role);
+    let encode = |learner: &Learner| -> Result<Vec<u8>, ServiceError> {
+        let msg = encode_policy(
+            &config.run_id,
+            role,
+            learner.counters.iteration,
+            &spec,
+            &learner.actor_critic,
+        )?;
+        Ok(msg
+            .encode_checked()
+            .map_err(lhm_cluster::ClusterError::from)?)
+    };
+    let latest = Arc::new(Mutex::new(encode(&learner)?));
+    let latest_for_queries = Arc::clone(&latest);
+    let _queryable = session
+        .declare_queryable(&policy_key)
+        .callback(move |query| {
+            let bytes = latest_for_queries
+                .lock()
+                .map(|b| b.clone())
+                .unwrap_or_default();
+            if let Err(e) = query.reply(query.key_expr().clone(), bytes).wait() {
+                tracing::warn!("answering a weights query: {e}");
+            }
+        })
+        .wait()
+        .map_err(zerr)?;
+    // Weights are large and must never be dropped: Block, on their own (higher) priority.
+    let weights_pub = session
+        .declare_publisher(&policy_key)
+        .congestion_control(CongestionControl::Block)
+        .priority(Priority::DataHigh)
+        .wait()
+        .map_err(zerr)?;
+    let traj_sub = session
+        .declare_subscriber(keys::trajectory_all(&config.run_id, role))
+        .wait()
+        .map_err(zerr)?;
+    let alive_sub = session
+        .liveliness()
+        .declare_subscriber(keys::status_all(&config.run_id))
+        .history(true)
+        .wait()
+        .map_err(zerr)?;
+    let _token = session
+        .liveliness()
+        .declare_token(keys::status(&config.run_id, "learner"))
+        .wait()
+        .map_err(zerr)?;
+    weights_pub
+        .put(latest.lock().map(|b| b.clone()).unwrap_or_default())
+        .wait()
+        .map_err(zerr)?;
+    tracing::info!(
+        "learner {} ({}) listening on {:?}, policy version {}",
+        config.run_id,
+        config.role,
+        endpoints.listen,
+        learner.counters.iteration
+    );
+    if let Some(f) = hooks.on_listening.as_mut() {
+        f();
+    }
+
+    let mut counters = IntakeCounters::default();
+    let mut alive: BTreeSet<String> = BTreeSet::new();
+    let mut seen: BTreeSet<String> = BTreeSet::new();
+    let mut pending: Vec<TrajectoryChunk> = Vec::new();
+    let mut pending_steps = 0usize;
+    let mut steps_used = 0u64;
+    let mut last_report: Option<IterationReport> = None;
+    let mut last_episodes: Option<EpisodeSummaryJson> = None;
+    let mut iteration_started = Instant::now();
+    let status = |learner: &Learner,
+                  counters: &IntakeCounters,
+                  alive: &BTreeSet<String>,
+                  seen: &BTreeSet<String>,
+                  steps_used: u64,
+                  last: &Option<IterationReport>,
+                  episodes: &Option<EpisodeSummaryJson>| LearnerStatus {
+        run_id: config.run_id.clone(),
+        iteration: learner.counters.iteration,
+        policy_version: learner.counters.iteration,
+        samples: learner.counters.samples,
+        steps_used,
+        intake: counters.clone(),
+        actors_alive: alive.iter().cloned().collect(),
+        actors_seen: seen.len(),
+        resumed_from_iteration: resumed,
+        last: last.clone(),
+        episodes: episodes.clone(),
+    };
+    let status_path = run_dir.join("status.json");
+    write_json_atomic(
+        &status_path,
+        &status(
+            &learner,
+            &counters,
+            &alive,
+            &seen,
+            steps_used,
+            &last_report,
+            &last_episodes,
+        ),
+    )?;
+
+    loop {
+        if shutdown::requested()
+            || config
+                .max_iterations
+                .is_some_and(|m| learner.counters.iteration >= m)
+        {
+            break;
+        }
+        while let Ok(Some(sample)) = alive_sub.try_recv() {
+            let key = sample.key_expr().as_str().to_owned();
+            let Some(process) = keys::process_of_status_key(&config.run_id, &key) else {
+                continue;
+            };
+            if process == "learner" {
+                continue;
+            }
+            match sample.kind() {
+                SampleKind::Put => {
+                    if alive.insert(process.to_owned()) {
+                        tracing::info!("{process} joined ({} alive)", alive.len());
+                    }
+                    seen.insert(process.to_owned());
+                }
+                SampleKind::Delete => {
+                    if alive.remove(process) {
+                        tracing::info!("{process} left ({} alive)", alive.len());
+                    }
+                }
+            }
+        }
+        let Ok(Some(sample)) = traj_sub.recv_timeout(Duration::from_millis(100)) else {
+            continue;
+        };
+        let bytes = sample.payload().to_bytes();
+        match admit(
+            &bytes,
+            &config.run_id,
+            role,
+            &spec,
+            learner.counters.iteration,
+            config.max_policy_lag,
+            &mut counters,
+        ) {
+            Intake::Accepted(chunk) => {
+                pending_steps += chunk.num_steps as usize;
+                pending.push(*chunk);
+            }
+            Intake::Stale { version } => {
+                tracing::debug!("dropped a chunk of policy version {version}")
+            }
+            Intake::Rejected(why) => {
+                tracing::warn!("rejected a message on the trajectory key: {why}")
+            }
+        }
+        if pending_steps < config.batch_steps {
+            continue;
+        }
+        // One update on everything pending.
+        let collect_s = iteration_started.elapsed().as_secs_f64();
+        let update_started = Instant::now();
+        let chunks = std::mem::take(&mut pending);
+        let n_steps = std::mem::take(&mut pending_steps);
+        let gae = GaeParams {
+            gamma: learner.config.ppo.gamma,
+            lambda: learner.config.ppo.lambda,
+        };
+        let assembled = assemble(&chunks, learner.amp.as_ref(), gae)?;
+        let ppo_stats = learner
+            .ppo
+            .update(&mut learner.actor_critic, &assembled.batch)?;
+        let amp_stats = match (learner.amp.as_mut(), demo.as_mut()) {
+            (Some(amp), Some(demo)) if !assembled.amp_features.is_empty() => {
+                let rows = assembled.amp_features.len() / amp.feature_dim();
+                let demo_rows = demo.sample(rows);
+                Some(amp.update(&assembled.amp_features, &demo_rows)?)
+            }
+            _ => None,
+        };
+        learner.counters.iteration += 1;
+        learner.counters.samples += n_steps as u64;
+        steps_used += n_steps as u64;
+        let bytes = encode(&learner)?;
+        if let Ok(mut l) = latest.lock() {
+            *l = bytes.clone();
+        }
+        weights_pub.put(bytes).wait().map_err(zerr)?;
+        let it = learner.counters.iteration;
+        if config.checkpoint_every > 0 && it % config.checkpoint_every == 0 {
+            learner.save(&stem)?;
+        }
+        let update_s = update_started.elapsed().as_secs_f64();
+        let total_s = collect_s + update_s;
+        let s = &assembled.summary;
+        let report = IterationReport {
+            iteration: it,
+            samples: learner.counters.samples,
+            samples_per_s: n_steps as f64 / total_s.max(1e-9),
+            mean_return: s.mean_return,
+            success_rate: s.success_rate,
+            episodes: s.episodes,
+            actors_alive: alive.len(),
+            update_s,
+        };
+        let mut m = Metrics {
+            run_id: config.run_id.clone(),
+            process: "learner".into(),
+            unix_time_ms: unix_ms(),
+            iteration: it,
+            ..Metrics::versioned()
+        };
+        let v = &mut m.values;
+        v.insert("samples_per_s".into(), report.samples_per_s);
+        v.insert("update_s".into(), update_s);
+        v.insert("episodes".into(), s.episodes as f64);
+        v.insert("mean_return".into(), s.mean_return);
+        v.insert("success_rate".into(), s.success_rate);
+        v.insert("falls".into(), s.falls as f64);
+        v.insert("mean_task_reward".into(), s.mean_task_reward);
+        v.insert("mean_style_reward".into(), s.mean_style_reward);
+        v.insert("ppo/policy_loss".into(), ppo_stats.policy_loss);
+        v.insert("ppo/value_loss".into(), ppo_stats.value_loss);
+        v.insert("ppo/approx_kl".into(), ppo_stats.approx_kl);
+        v.insert("ppo/clip_fraction".into(), ppo_stats.clip_fraction);
+        if let Some(a) = &amp_stats {
+            v.insert("amp/accuracy".into(), a.accuracy());
+        }
+        v.insert("intake/accepted".into(), counters.accepted as f64);
+        v.insert("intake/stale".into(), counters.stale as f64);
+        v.insert("intake/rejected".into(), counters.rejected() as f64);
+        v.insert("actors_alive".into(), alive.len() as f64);
+        if let Ok(bytes) = m.encode_checked() {
+            let _ = session
+                .put(keys::metrics(&config.run_id, "learner"), bytes)
+                .congestion_control(CongestionControl::Drop)
+                .priority(Priority::DataLow)
+                .wait();
+        }
+        if let Some(f) = hooks.on_iteration.as_mut() {
+            f(&report);
+        }
+        last_episodes = Some(EpisodeSummaryJson::from(s));
+        last_report = Some(report);
+        write_json_atomic(
+            &status_path,
+            &status(
+                &learner,
+                &counters,
+                &alive,
+                &seen,
+                steps_used,
+                &last_report,
+                &last_episodes,
+            ),
+        )?;
+        iteration_started = Instant::now();
+    }
+    learner.save(&stem)?;
+    tracing::info!(
+        "learner stopped at iteration {}; checkpoint {}",
+        learner.counters.iteration,
+        stem.display()
+    );
+    let final_status = status(
+        &learner,
+        &counters,
+        &alive,
+        &seen,
+        steps_used,
+        &last_report,
+        &last_episodes,
+    );
+    write_json_atomic(&status_path, &final_status)?;
+    let _ = session.close().wait();
+    Ok(final_status)
+}
+
+fn unix_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
