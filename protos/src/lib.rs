@@ -31,6 +31,23 @@ pub mod v1 {
     include!(concat!(env!("OUT_DIR"), "/lhm.v1.rs"));
 }
 
+/// Encoded `google.protobuf.FileDescriptorSet` of our Foxglove schemas (`proto/foxglove/*.proto`,
+/// with their `google/protobuf` imports and comments): the MCAP schema data of channels carrying
+/// [`foxglove`] messages.
+pub const FOXGLOVE_DESCRIPTOR_SET: &[u8] =
+    include_bytes!(concat!(env!("OUT_DIR"), "/foxglove_descriptor.bin"));
+
+/// The Foxglove visualisation messages MCAP recordings use (`foxglove.SceneUpdate`,
+/// `foxglove.FrameTransforms`, ...), generated from our own minimal copies of Foxglove's schemas:
+/// same package, message and field names and numbers, so the Foxglove app draws them. Timestamps
+/// and durations are [`prost_types::Timestamp`] and [`prost_types::Duration`].
+pub mod foxglove {
+    include!(concat!(env!("OUT_DIR"), "/foxglove.rs"));
+}
+
+/// Downstream crates use `lhm_protos::prost_types` and so always match our prost-types version.
+pub use prost_types;
+
 pub use v1::{
     ActorState, ActorStatus, EpisodeFrames, EpisodeStats, LabelReply, LabelRequest, Metrics,
     Normalizer, PolicyWeights, Role, Stage, TrajectoryChunk,

@@ -297,7 +297,7 @@ pub(crate) fn episode_frames(m: &EpisodeFrames) -> Result {
     c.positive("num_frames", m.num_frames)?;
     c.positive("num_bodies", m.num_bodies)?;
     let n = m.num_frames;
-    let per_frame = |k: u32, each: u32| k.checked_mul(each).unwrap_or(u32::MAX);
+    let per_frame = |k: u32, each: u32| k.saturating_mul(each);
     c.shape(
         "body_positions",
         m.body_positions.len(),

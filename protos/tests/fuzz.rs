@@ -143,7 +143,7 @@ fn fuzz<M: WireMessage + Debug>(sample: &M, seed: u64) {
     // Cutting a message short almost always leaves a length field or an array inconsistent.
     // Bit flips mostly land in float payloads and legitimately give other finite floats, but
     // those in tags, lengths, dimensions, enums and UTF-8 must be caught. (Measured: >= 0.90 and
-    // >= 0.12 with these seeds.)
+    // >= 0.11 with these seeds.)
     assert!(
         truncated >= 0.8,
         "{name}: only {truncated:.3} of truncations rejected"
@@ -182,4 +182,9 @@ fn actor_status_decoding_never_panics() {
 #[test]
 fn metrics_decoding_never_panics() {
     fuzz(&sample_metrics(), 15);
+}
+
+#[test]
+fn episode_frames_decoding_never_panics() {
+    fuzz(&sample_episode_frames(), 16);
 }

@@ -4,8 +4,8 @@ use std::fmt::Debug;
 
 use common::*;
 use lhm_protos::{
-    prost::Message, ActorStatus, LabelReply, LabelRequest, Metrics, PolicyWeights, TrajectoryChunk,
-    WireMessage, FILE_DESCRIPTOR_SET, SCHEMA_VERSION,
+    prost::Message, ActorStatus, EpisodeFrames, LabelReply, LabelRequest, Metrics, PolicyWeights,
+    TrajectoryChunk, WireMessage, FILE_DESCRIPTOR_SET, SCHEMA_VERSION,
 };
 
 fn round_trip<M: WireMessage + PartialEq + Debug>(message: M) {
@@ -71,6 +71,18 @@ fn metrics_round_trip() {
 }
 
 #[test]
+fn episode_frames_round_trip() {
+    round_trip(sample_episode_frames());
+    // An episode in an empty room: no objects at all.
+    round_trip(EpisodeFrames {
+        num_objects: 0,
+        object_positions: vec![],
+        object_rotations: vec![],
+        ..sample_episode_frames()
+    });
+}
+
+#[test]
 fn metrics_may_carry_non_finite_values() {
     let mut metrics = sample_metrics();
     metrics.values.insert("loss/value".into(), f64::NAN);
@@ -90,6 +102,7 @@ fn versioned_sets_the_schema_version() {
     assert_eq!(LabelReply::versioned().schema_version, SCHEMA_VERSION);
     assert_eq!(ActorStatus::versioned().schema_version, SCHEMA_VERSION);
     assert_eq!(Metrics::versioned().schema_version, SCHEMA_VERSION);
+    assert_eq!(EpisodeFrames::versioned().schema_version, SCHEMA_VERSION);
 }
 
 #[test]
@@ -150,6 +163,7 @@ fn file_descriptor_set_names_every_wire_message() {
         LabelReply::FULL_NAME,
         ActorStatus::FULL_NAME,
         Metrics::FULL_NAME,
+        EpisodeFrames::FULL_NAME,
         "lhm.v1.EpisodeStats",
         "lhm.v1.Normalizer",
     ] {

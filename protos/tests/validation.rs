@@ -4,8 +4,8 @@ use std::fmt::Debug;
 
 use common::*;
 use lhm_protos::{
-    prost::Message, ActorStatus, LabelReply, LabelRequest, Metrics, Normalizer, PolicyWeights,
-    Role, Stage, TrajectoryChunk, WireError, WireMessage, SCHEMA_VERSION,
+    prost::Message, ActorStatus, EpisodeFrames, LabelReply, LabelRequest, Metrics, Normalizer,
+    PolicyWeights, Role, Stage, TrajectoryChunk, WireError, WireMessage, SCHEMA_VERSION,
 };
 
 /// Both the receiver (decode_checked) and the sender (encode_checked) reject `message` as
@@ -55,6 +55,7 @@ fn wrong_versions_are_rejected() {
     assert_wrong_version(sample_label_reply());
     assert_wrong_version(sample_actor_status());
     assert_wrong_version(sample_metrics());
+    assert_wrong_version(sample_episode_frames());
 }
 
 #[test]
@@ -397,4 +398,61 @@ fn actor_status_and_metrics_are_checked() {
     let mut m = sample_metrics();
     m.values.insert(String::new(), 1.0);
     assert_invalid(m, "values");
+}
+
+#[test]
+fn episode_frames_are_checked() {
+    let e = sample_episode_frames;
+    assert_invalid(EpisodeFrames { role: 0, ..e() }, "role");
+    assert_invalid(
+        EpisodeFrames {
+            task_id: String::new(),
+            ..e()
+        },
+        "task_id",
+    );
+    for frame_dt in [0.0, -0.1, f32::NAN, f32::INFINITY] {
+        assert_invalid(EpisodeFrames { frame_dt, ..e() }, "frame_dt");
+    }
+    assert_invalid(
+        EpisodeFrames {
+            num_frames: 0,
+            ..e()
+        },
+        "num_frames",
+    );
+    assert_invalid(
+        EpisodeFrames {
+            num_bodies: 0,
+            ..e()
+        },
+        "num_bodies",
+    );
+    // One frame more than the arrays hold: every array is now short, the first one is blamed.
+    assert_invalid(
+        EpisodeFrames {
+            num_frames: NUM_FRAMES + 1,
+            ..e()
+        },
+        "body_positions",
+    );
+    let mut m = e();
+    m.body_rotations.pop();
+    assert_invalid(m, "body_rotations");
+    assert_invalid(
+        EpisodeFrames {
+            num_objects: NUM_OBJECTS + 1,
+            ..e()
+        },
+        "object_positions",
+    );
+    let mut m = e();
+    m.object_rotations.push(1.0);
+    assert_invalid(m, "object_rotations");
+    let mut m = e();
+    m.body_positions[5] = f32::NAN;
+    assert_invalid(m, "body_positions");
+    let mut m = e();
+    m.object_rotations[0] = f32::INFINITY;
+    assert_invalid(m, "object_rotations");
 }

@@ -1,8 +1,11 @@
 //! A benchmark task's room in rapier: walls, static obstacles (fixed boxes or cylinders with their
 //! catalogue sizes), and the movable objects as dynamic bodies with their mass, resting where the
 //! task puts them. Grasping is by contact only, so objects get real friction and no attachment.
+//!
+//! The geometry itself (wall boxes, solids, poses) is exposed as plain data so that other views of
+//! the room (e.g. the MCAP recorder) draw exactly what the physics simulates.
 
-use lhm_scenes::{Catalogue, Shape, Task};
+use lhm_scenes::{Catalogue, MovableObject, Obstacle, Shape, Task};
 use rapier3d::prelude::*;
 
 pub const WALL_HEIGHT: f32 = 2.5;
@@ -20,34 +23,46 @@ pub struct Room {
     pub objects: Vec<RigidBodyHandle>,
 }
 
-fn yaw_rotation(yaw: f64) -> Rotation {
-    Rotation::from_rotation_z(yaw as f32)
+/// The collision solid of an obstacle or object, in its body's frame (centred on the body).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Solid {
+    Cuboid {
+        half: Vector,
+    },
+    /// Axis along the body's z (vertical when the body is upright).
+    Cylinder {
+        half_height: f32,
+        radius: f32,
+    },
 }
 
-fn collider_for(shape: Shape, size: [f64; 3]) -> ColliderBuilder {
+/// The solid of a catalogue shape with bounding-box `size` [length, width, height]: cylinders take
+/// the larger footprint side as their diameter.
+pub fn solid(shape: Shape, size: [f64; 3]) -> Solid {
     let [l, w, h] = size.map(|x| x as f32);
     match shape {
-        Shape::Box => ColliderBuilder::cuboid(l / 2.0, w / 2.0, h / 2.0),
-        // Cylinders are along y in parry; rotate so the axis is vertical.
-        Shape::Cylinder => ColliderBuilder::cylinder(h / 2.0, l.max(w) / 2.0)
-            .rotation(Vector::new(std::f32::consts::FRAC_PI_2, 0.0, 0.0)),
+        Shape::Box => Solid::Cuboid {
+            half: Vector::new(l / 2.0, w / 2.0, h / 2.0),
+        },
+        Shape::Cylinder => Solid::Cylinder {
+            half_height: h / 2.0,
+            radius: l.max(w) / 2.0,
+        },
     }
 }
 
-/// Adds the task's walls, obstacles and objects. Unknown catalogue kinds were rejected when the
-/// task was loaded, so a missing type here falls back to a box of the stored size.
-pub fn build_room(
-    task: &Task,
-    catalogue: &Catalogue,
-    bodies: &mut RigidBodySet,
-    colliders: &mut ColliderSet,
-) -> Room {
-    let mut room = Room::default();
-    let [w, d] = task.room_size.map(|x| x as f32);
-    let walls = bodies.insert(RigidBodyBuilder::fixed().build());
-    room.walls = Some(walls);
+/// The catalogue shape of `kind`. Unknown kinds were rejected when the task was loaded, so a
+/// missing type falls back to a box of the stored size.
+pub fn shape_of(catalogue: &Catalogue, kind: &str) -> Shape {
+    catalogue.get(kind).map_or(Shape::Box, |t| t.shape)
+}
+
+/// The four walls as (centre, half extents), world frame: just outside the `room_size` floor
+/// [x extent, y extent], the north/south walls spanning the corners.
+pub fn wall_boxes(room_size: [f64; 2]) -> [(Vector, Vector); 4] {
+    let [w, d] = room_size.map(|x| x as f32);
     let t = WALL_THICKNESS / 2.0;
-    for (pos, half) in [
+    [
         (
             Vector::new(0.0, d / 2.0 + t, WALL_HEIGHT / 2.0),
             Vector::new(w / 2.0 + 2.0 * t, t, WALL_HEIGHT / 2.0),
@@ -64,7 +79,57 @@ pub fn build_room(
             Vector::new(-w / 2.0 - t, 0.0, WALL_HEIGHT / 2.0),
             Vector::new(t, d / 2.0, WALL_HEIGHT / 2.0),
         ),
-    ] {
+    ]
+}
+
+/// Pose of a static obstacle's body: standing on the floor (centre at half its height), turned by
+/// its yaw.
+pub fn obstacle_pose(o: &Obstacle) -> Pose {
+    Pose::from_parts(
+        Vector::new(o.pos[0] as f32, o.pos[1] as f32, (o.size[2] / 2.0) as f32),
+        yaw_rotation(o.yaw),
+    )
+}
+
+/// Pose of a movable object's body at the start of the task.
+pub fn object_start_pose(o: &MovableObject) -> Pose {
+    Pose::from_parts(
+        Vector::new(o.pos[0] as f32, o.pos[1] as f32, o.pos[2] as f32),
+        yaw_rotation(o.yaw),
+    )
+}
+
+fn yaw_rotation(yaw: f64) -> Rotation {
+    Rotation::from_rotation_z(yaw as f32)
+}
+
+fn collider_for(shape: Shape, size: [f64; 3]) -> ColliderBuilder {
+    match solid(shape, size) {
+        Solid::Cuboid { half } => ColliderBuilder::cuboid(half.x, half.y, half.z),
+        // Cylinders are along y in parry; rotate so the axis is vertical.
+        Solid::Cylinder {
+            half_height,
+            radius,
+        } => ColliderBuilder::cylinder(half_height, radius).rotation(Vector::new(
+            std::f32::consts::FRAC_PI_2,
+            0.0,
+            0.0,
+        )),
+    }
+}
+
+/// Adds the task's walls, obstacles and objects. Unknown catalogue kinds were rejected when the
+/// task was loaded, so a missing type here falls back to a box of the stored size.
+pub fn build_room(
+    task: &Task,
+    catalogue: &Catalogue,
+    bodies: &mut RigidBodySet,
+    colliders: &mut ColliderSet,
+) -> Room {
+    let mut room = Room::default();
+    let walls = bodies.insert(RigidBodyBuilder::fixed().build());
+    room.walls = Some(walls);
+    for (pos, half) in wall_boxes(task.room_size) {
         colliders.insert_with_parent(
             ColliderBuilder::cuboid(half.x, half.y, half.z)
                 .translation(pos)
@@ -74,15 +139,9 @@ pub fn build_room(
         );
     }
     for o in &task.obstacles {
-        let shape = catalogue.get(&o.kind).map_or(Shape::Box, |t| t.shape);
-        let pos = Vector::new(o.pos[0] as f32, o.pos[1] as f32, (o.size[2] / 2.0) as f32);
-        let h = bodies.insert(
-            RigidBodyBuilder::fixed()
-                .pose(Pose::from_parts(pos, yaw_rotation(o.yaw)))
-                .build(),
-        );
+        let h = bodies.insert(RigidBodyBuilder::fixed().pose(obstacle_pose(o)).build());
         colliders.insert_with_parent(
-            collider_for(shape, o.size)
+            collider_for(shape_of(catalogue, &o.kind), o.size)
                 .friction(OBJECT_FRICTION)
                 .build(),
             h,
@@ -91,18 +150,16 @@ pub fn build_room(
         room.obstacles.push(h);
     }
     for o in &task.objects {
-        let shape = catalogue.get(&o.kind).map_or(Shape::Box, |t| t.shape);
-        let pos = Vector::new(o.pos[0] as f32, o.pos[1] as f32, o.pos[2] as f32);
         let h = bodies.insert(
             RigidBodyBuilder::dynamic()
-                .pose(Pose::from_parts(pos, yaw_rotation(o.yaw)))
+                .pose(object_start_pose(o))
                 // Objects are small and may be dropped; CCD keeps them out of the floor (the
                 // character's links keep it off: on multibody links it tore joints apart).
                 .ccd_enabled(true)
                 .build(),
         );
         colliders.insert_with_parent(
-            collider_for(shape, o.size)
+            collider_for(shape_of(catalogue, &o.kind), o.size)
                 .mass(o.mass as f32)
                 .friction(OBJECT_FRICTION)
                 .build(),

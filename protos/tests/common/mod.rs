@@ -6,8 +6,8 @@
 use std::collections::BTreeMap;
 
 use lhm_protos::{
-    ActorState, ActorStatus, EpisodeStats, LabelReply, LabelRequest, Metrics, Normalizer,
-    PolicyWeights, Role, Stage, TrajectoryChunk, WireMessage,
+    ActorState, ActorStatus, EpisodeFrames, EpisodeStats, LabelReply, LabelRequest, Metrics,
+    Normalizer, PolicyWeights, Role, Stage, TrajectoryChunk, WireMessage,
 };
 
 /// splitmix64: deterministic, dependency-free, good enough for fixtures and fuzzing.
@@ -201,5 +201,54 @@ pub fn sample_metrics() -> Metrics {
         iteration: 2_500,
         values,
         ..Metrics::versioned()
+    }
+}
+
+pub const NUM_FRAMES: u32 = 6;
+pub const NUM_BODIES: u32 = 4;
+pub const NUM_OBJECTS: u32 = 2;
+
+/// Six frames of a four-body character and two objects; rotations are unit quaternions.
+pub fn sample_episode_frames() -> EpisodeFrames {
+    let mut rng = Rng::new(6);
+    let unit_quats = |rng: &mut Rng, n: usize| -> Vec<f32> {
+        (0..n)
+            .flat_map(|_| {
+                let q = [rng.unit(), rng.unit(), rng.unit(), 1.0 + rng.unit().abs()];
+                let norm = q.iter().map(|x| x * x).sum::<f32>().sqrt();
+                q.map(|x| x / norm)
+            })
+            .collect()
+    };
+    let (f, b, o) = (
+        NUM_FRAMES as usize,
+        NUM_BODIES as usize,
+        NUM_OBJECTS as usize,
+    );
+    EpisodeFrames {
+        run_id: "run-2024-06-01-a".into(),
+        actor_id: "actor-03".into(),
+        role: Role::Teacher1.into(),
+        policy_version: 117,
+        task_id: "train-0001".into(),
+        frame_dt: 1.0 / 30.0,
+        num_frames: NUM_FRAMES,
+        num_bodies: NUM_BODIES,
+        num_objects: NUM_OBJECTS,
+        body_positions: rng.floats(f * b * 3, 2.0),
+        body_rotations: unit_quats(&mut rng, f * b),
+        object_positions: rng.floats(f * o * 3, 2.0),
+        object_rotations: unit_quats(&mut rng, f * o),
+        stats: Some(EpisodeStats {
+            episode_return: 3.5,
+            length: NUM_FRAMES,
+            cycles_attempted: 1,
+            cycles_succeeded: 0,
+            final_placement_error_m: vec![0.8],
+            fell: false,
+            physics_invalid: false,
+            task_id: "train-0001".into(),
+        }),
+        ..EpisodeFrames::versioned()
     }
 }
