@@ -3,7 +3,7 @@
 use super::deepmimic::DeepMimicClip;
 use super::omomo::OmomoClip;
 use super::MotionError;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Source {
@@ -19,32 +19,46 @@ pub struct ClipInfo {
     pub duration_s: f32,
 }
 
-/// Parses every clip under `dir` (as laid out by `scripts/install-motions`).
-pub fn list(dir: &Path) -> Result<Vec<ClipInfo>, MotionError> {
+/// The clip files of one source under `dir` (as laid out by `scripts/install-motions`), sorted
+/// by path, each with its clip name (the file stem).
+pub fn clip_files(dir: &Path, source: Source) -> Result<Vec<(String, PathBuf)>, MotionError> {
     if !dir.join("MANIFEST").is_file() {
         return Err(MotionError::NotInstalled {
             path: dir.display().to_string(),
         });
     }
+    let folder = dir.join(match source {
+        Source::DeepMimic => "deepmimic",
+        Source::Omomo => "omomo",
+    });
+    let entries = std::fs::read_dir(&folder).map_err(|source| MotionError::Io {
+        file: folder.display().to_string(),
+        source,
+    })?;
+    let mut paths: Vec<_> = entries.filter_map(Result::ok).map(|e| e.path()).collect();
+    paths.sort();
+    Ok(paths
+        .into_iter()
+        .map(|path| {
+            let name = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            (name, path)
+        })
+        .collect())
+}
+
+/// Parses every clip under `dir` (as laid out by `scripts/install-motions`).
+pub fn list(dir: &Path) -> Result<Vec<ClipInfo>, MotionError> {
     let mut out = Vec::new();
-    for (sub, source) in [("deepmimic", Source::DeepMimic), ("omomo", Source::Omomo)] {
-        let folder = dir.join(sub);
-        let entries = std::fs::read_dir(&folder).map_err(|source| MotionError::Io {
-            file: folder.display().to_string(),
-            source,
-        })?;
-        let mut paths: Vec<_> = entries.filter_map(Result::ok).map(|e| e.path()).collect();
-        paths.sort();
-        for path in paths {
+    for source in [Source::DeepMimic, Source::Omomo] {
+        for (name, path) in clip_files(dir, source)? {
             let file = path.display().to_string();
             let read_err = |source| MotionError::Io {
                 file: file.clone(),
                 source,
             };
-            let name = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
             let (frames, duration_s) = match source {
                 Source::DeepMimic => {
                     let c = DeepMimicClip::parse(

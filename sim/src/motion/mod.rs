@@ -1,10 +1,14 @@
 //! Reference motion for AMP: the clips `scripts/install-motions` puts in a local cache (DESIGN.md
-//! §5), parsed from their source formats. Retargeting onto the character comes next.
+//! §5), parsed from their source formats, retargeted onto the character ([`retarget`]), and
+//! sampled as demo AMP features for the discriminator ([`demo`]).
 
 pub mod deepmimic;
+pub mod demo;
 pub mod library;
 pub mod omomo;
 pub mod retarget;
+
+pub use demo::{AmpWindow, DemoMotion};
 
 use std::path::PathBuf;
 
@@ -20,6 +24,19 @@ pub enum MotionError {
     },
     #[error("{file}: {message}")]
     Corrupt { file: String, message: String },
+    #[error("{path}: no clips to sample demo AMP features from")]
+    NoClips { path: String },
+    #[error(
+        "{clip}: {duration_s:.3} s long, shorter than the {frames}-frame AMP window ({needed_s:.3} s)"
+    )]
+    TooShort {
+        clip: String,
+        duration_s: f32,
+        frames: usize,
+        needed_s: f32,
+    },
+    #[error("AMP window: {0}")]
+    Window(String),
 }
 
 /// Where the clips live: `$LHM_MOTION_DIR`, else `~/.cache/lhm/motions`.

@@ -1,0 +1,635 @@
+//! Demo AMP features: windows of reference motion in exactly the layout the environment gives the
+//! discriminator (`TaskEnv::amp_features`: the last N AMP frames, oldest first, one control step
+//! apart), so the learner can compare policy and mocap feature for feature.
+//!
+//! A window starts at a continuous random time, not on a clip frame, so the discriminator never
+//! sees a 30 fps grid the simulation does not share. Poses between clip frames are interpolated
+//! (root position lerp, rotations slerp); velocities come from finite differences of the
+//! interpolated poses, and every frame goes through [`amp_frame`], the one definition of the layout.
+
+use super::deepmimic::DeepMimicClip;
+use super::library::{self, Source};
+use super::retarget::{deepmimic_poses, forward_kinematics, KinematicPose};
+use super::MotionError;
+use crate::env::EnvConfig;
+use crate::mjcf::{BodyDef, CharacterModel};
+use crate::obs::{amp_frame, amp_frame_dim, BodyState};
+use crate::world::SimConfig;
+use rapier3d::math::{Rotation, Vector};
+use std::path::Path;
+
+/// The stretch of motion one discriminator input covers: `frames` AMP frames `control_dt` apart.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AmpWindow {
+    pub frames: usize,
+    pub control_dt: f32,
+}
+
+impl AmpWindow {
+    /// The window the environment uses under these configurations.
+    pub fn of(env: &EnvConfig, sim: &SimConfig) -> Self {
+        Self {
+            // AmpHistory keeps at least one frame; match it.
+            frames: env.amp_frames.max(1),
+            control_dt: 1.0 / sim.control_hz,
+        }
+    }
+
+    /// Seconds from the first frame of the window to its last.
+    pub fn span_s(&self) -> f32 {
+        self.frames.saturating_sub(1) as f32 * self.control_dt
+    }
+}
+
+impl Default for AmpWindow {
+    fn default() -> Self {
+        Self::of(&EnvConfig::default(), &SimConfig::default())
+    }
+}
+
+/// One retargeted clip: at least two poses, uniformly `frame_dt` apart (checked on construction).
+#[derive(Clone, Debug)]
+struct DemoClip {
+    name: String,
+    poses: Vec<KinematicPose>,
+    frame_dt: f32,
+}
+
+impl DemoClip {
+    fn duration_s(&self) -> f32 {
+        (self.poses.len() - 1) as f32 * self.frame_dt
+    }
+
+    /// The pose at time `t` (clamped to the clip), between its two neighbouring frames.
+    fn pose_at(&self, t: f32) -> KinematicPose {
+        let last = self.poses.len() - 1;
+        let s = (t / self.frame_dt).clamp(0.0, last as f32);
+        let i = (s.floor() as usize).min(last - 1);
+        let a = s - i as f32;
+        let (p, q) = (&self.poses[i], &self.poses[i + 1]);
+        KinematicPose {
+            root_pos: p.root_pos.lerp(q.root_pos, a),
+            root_rot: p.root_rot.slerp(q.root_rot, a).normalize(),
+            local_rots: p
+                .local_rots
+                .iter()
+                .zip(&q.local_rots)
+                .map(|(r, s)| r.slerp(*s, a).normalize())
+                .collect(),
+        }
+    }
+}
+
+/// Retargeted reference clips to sample demo AMP features from.
+#[derive(Clone, Debug)]
+pub struct DemoMotion {
+    model: CharacterModel,
+    window: AmpWindow,
+    clips: Vec<DemoClip>,
+    /// Per body, its centre of mass in its own frame: rapier reports a body's linear velocity at
+    /// its centre of mass, so the demo root velocity must be taken there too (the pelvis's is
+    /// ~0.1 m above its origin, which matters whenever the pelvis pitches or rolls).
+    com: Vec<Vector>,
+}
+
+impl DemoMotion {
+    /// Clips given as (name, poses of `model`, seconds between poses). Refuses a clip with fewer
+    /// than two poses, a non-positive frame time, poses of another model, or a duration shorter
+    /// than `window` (naming the clip).
+    pub fn from_clips(
+        model: &CharacterModel,
+        clips: Vec<(String, Vec<KinematicPose>, f32)>,
+        window: AmpWindow,
+    ) -> Result<Self, MotionError> {
+        if window.frames == 0 || !(window.control_dt.is_finite() && window.control_dt > 0.0) {
+            return Err(MotionError::Window(format!(
+                "{} frames {} s apart; need at least one frame and a positive step",
+                window.frames, window.control_dt
+            )));
+        }
+        if clips.is_empty() {
+            return Err(MotionError::NoClips {
+                path: "demo motion".into(),
+            });
+        }
+        let mut out = Vec::with_capacity(clips.len());
+        for (name, poses, frame_dt) in clips {
+            let corrupt = |message: String| MotionError::Corrupt {
+                file: name.clone(),
+                message,
+            };
+            if poses.len() < 2 {
+                return Err(corrupt(format!(
+                    "{} poses; a clip needs at least 2",
+                    poses.len()
+                )));
+            }
+            if !(frame_dt.is_finite() && frame_dt > 0.0) {
+                return Err(corrupt(format!("frame time {frame_dt} s is not positive")));
+            }
+            let bodies = model.bodies.len();
+            if let Some(i) = poses.iter().position(|p| p.local_rots.len() != bodies) {
+                return Err(corrupt(format!(
+                    "pose {i} has {} body rotations, the character {bodies}",
+                    poses[i].local_rots.len()
+                )));
+            }
+            let clip = DemoClip {
+                name,
+                poses,
+                frame_dt,
+            };
+            // A little slack so a clip exactly as long as the window is not lost to rounding.
+            if clip.duration_s() < window.span_s() * (1.0 - 1e-5) {
+                return Err(MotionError::TooShort {
+                    duration_s: clip.duration_s(),
+                    clip: clip.name,
+                    frames: window.frames,
+                    needed_s: window.span_s(),
+                });
+            }
+            out.push(clip);
+        }
+        Ok(Self {
+            model: model.clone(),
+            window,
+            clips: out,
+            com: model.bodies.iter().map(centre_of_mass).collect(),
+        })
+    }
+
+    /// Every DeepMimic clip installed under `dir` (`dir/deepmimic/`, as [`library::list`] finds
+    /// them), retargeted onto `model`. OMOMO clips are skipped: retargeting SMPL-H onto the
+    /// character does not exist yet. A missing install is [`MotionError::NotInstalled`], which
+    /// tells the user to run `scripts/install-motions`.
+    pub fn load_dir(
+        model: &CharacterModel,
+        dir: &Path,
+        window: AmpWindow,
+    ) -> Result<Self, MotionError> {
+        let mut clips = Vec::new();
+        for (name, path) in library::clip_files(dir, Source::DeepMimic)? {
+            let file = path.display().to_string();
+            let text = std::fs::read_to_string(&path).map_err(|source| MotionError::Io {
+                file: file.clone(),
+                source,
+            })?;
+            let clip = DeepMimicClip::parse(&text, &file)?;
+            let frame_dt = uniform_frame_dt(&clip, &file)?;
+            clips.push((name, deepmimic_poses(model, &clip), frame_dt));
+        }
+        if clips.is_empty() {
+            return Err(MotionError::NoClips {
+                path: dir.join("deepmimic").display().to_string(),
+            });
+        }
+        Self::from_clips(model, clips, window)
+    }
+
+    pub fn window(&self) -> AmpWindow {
+        self.window
+    }
+
+    /// Width of one sampled row: `window.frames × amp_frame_dim(model)`, as `TaskEnv::amp_dim`.
+    pub fn feature_dim(&self) -> usize {
+        self.window.frames * amp_frame_dim(&self.model)
+    }
+
+    /// (name, duration in seconds) of every clip, in load order.
+    pub fn clips(&self) -> impl Iterator<Item = (&str, f32)> {
+        self.clips.iter().map(|c| (c.name.as_str(), c.duration_s()))
+    }
+
+    /// `n` rows of [`Self::feature_dim`] numbers, row after row. Each row picks a clip with
+    /// probability proportional to its duration, then a start time uniform over the times whose
+    /// window fits in the clip, and holds the window's AMP frames oldest first. `rng` returns
+    /// uniform numbers in [0, 1); each row draws two, the clip then the start.
+    pub fn sample_features(&self, n: usize, rng: &mut impl FnMut() -> f64) -> Vec<f32> {
+        let mut out = Vec::with_capacity(n * self.feature_dim());
+        let total: f64 = self.clips.iter().map(|c| f64::from(c.duration_s())).sum();
+        for _ in 0..n {
+            let target = rng() * total;
+            let mut acc = 0.0;
+            // Rounding may leave `target` past the last sum: fall back to the last clip.
+            let mut pick = self.clips.len() - 1;
+            for (i, c) in self.clips.iter().enumerate() {
+                acc += f64::from(c.duration_s());
+                if target < acc {
+                    pick = i;
+                    break;
+                }
+            }
+            let slack = (self.clips[pick].duration_s() - self.window.span_s()).max(0.0);
+            let start = rng() as f32 * slack;
+            self.push_window(pick, start, &mut out);
+        }
+        out
+    }
+
+    fn push_window(&self, clip: usize, start: f32, out: &mut Vec<f32>) {
+        for k in 0..self.window.frames {
+            let t = start + k as f32 * self.window.control_dt;
+            out.extend(amp_frame(&self.model, &self.body_states_at(clip, t)));
+        }
+    }
+
+    /// Clip `clip`'s pose at time `t` seconds (clamped to the clip). Panics if `clip` is not an
+    /// index into [`Self::clips`].
+    pub fn pose_at(&self, clip: usize, t: f32) -> KinematicPose {
+        self.clips[clip].pose_at(t)
+    }
+
+    /// Every body's world state at time `t` of clip `clip`, as `World::body_states` would give
+    /// it: body origin and rotation, linear velocity of the body's centre of mass, angular
+    /// velocity. Velocities are central differences over one clip frame around `t` (one-sided
+    /// at the clip's ends), which is exact within a frame interval of the interpolated motion
+    /// and smooths the kinks at clip frames.
+    pub fn body_states_at(&self, clip: usize, t: f32) -> Vec<BodyState> {
+        let c = &self.clips[clip];
+        let end = c.duration_s();
+        let t = t.clamp(0.0, end);
+        let h = 0.5 * c.frame_dt;
+        let (ta, tb) = ((t - h).max(0.0), (t + h).min(end));
+        // tb > ta: the clip is longer than zero and h > 0.
+        let dt = tb - ta;
+        let now = forward_kinematics(&self.model, &c.pose_at(t));
+        let before = forward_kinematics(&self.model, &c.pose_at(ta));
+        let after = forward_kinematics(&self.model, &c.pose_at(tb));
+        now.iter()
+            .zip(before.iter().zip(&after))
+            .zip(&self.com)
+            .map(|((&(pos, rot), (a, b)), &com)| {
+                let com_a = a.0 + a.1 * com;
+                let com_b = b.0 + b.1 * com;
+                BodyState {
+                    pos,
+                    rot,
+                    linvel: (com_b - com_a) / dt,
+                    angvel: angular_velocity(a.1, b.1, dt),
+                }
+            })
+            .collect()
+    }
+}
+
+/// World-frame angular velocity turning `from` into `to` in `dt`: the relative rotation
+/// `to · from⁻¹` as a scaled axis, the short way round.
+fn angular_velocity(from: Rotation, to: Rotation, dt: f32) -> Vector {
+    let mut d = (to * from.inverse()).normalize();
+    if d.w < 0.0 {
+        d = -d;
+    }
+    d.to_scaled_axis() / dt
+}
+
+/// Mass-weighted centre of a body's geoms in its frame, as rapier computes it from the colliders
+/// (each geom's centroid is its `pos`). The origin for a massless body.
+fn centre_of_mass(body: &BodyDef) -> Vector {
+    let (mut sum, mut mass) = (Vector::ZERO, 0.0f64);
+    for g in &body.geoms {
+        let m = g.mass();
+        sum += Vector::new(g.pos[0] as f32, g.pos[1] as f32, g.pos[2] as f32) * m as f32;
+        mass += m;
+    }
+    if mass > 0.0 {
+        sum / mass as f32
+    } else {
+        Vector::ZERO
+    }
+}
+
+/// A DeepMimic clip's frame time. Each frame carries its own duration; the installed clips use
+/// one throughout, and interpolation here assumes so, so a clip whose frame times differ by more
+/// than 5 % is refused rather than silently time-warped.
+fn uniform_frame_dt(clip: &DeepMimicClip, file: &str) -> Result<f32, MotionError> {
+    let n = clip.frames.len().saturating_sub(1).max(1);
+    let mean = clip.duration() / n as f32;
+    if let Some((i, f)) = clip.frames[..clip.frames.len().saturating_sub(1)]
+        .iter()
+        .enumerate()
+        .find(|(_, f)| (f.duration - mean).abs() > 0.05 * mean)
+    {
+        return Err(MotionError::Corrupt {
+            file: file.into(),
+            message: format!(
+                "frame {i}: duration {} s, the clip's mean is {mean} s; only uniformly timed \
+                 clips are supported",
+                f.duration
+            ),
+        });
+    }
+    Ok(mean)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mjcf::JointKind;
+    use crate::obs::twist_angle;
+    use lhm_scenes::rng::SplitMix64;
+
+    const DT: f32 = 1.0 / 30.0;
+
+    fn still(model: &CharacterModel, pos: Vector, rot: Rotation) -> KinematicPose {
+        KinematicPose {
+            root_pos: pos,
+            root_rot: rot,
+            local_rots: vec![Rotation::IDENTITY; model.bodies.len()],
+        }
+    }
+
+    fn window(frames: usize) -> AmpWindow {
+        AmpWindow {
+            frames,
+            control_dt: DT,
+        }
+    }
+
+    /// Replays `values` in a loop: pins the clip and start time a row draws.
+    fn replay(values: Vec<f64>) -> impl FnMut() -> f64 {
+        let mut i = 0;
+        move || {
+            let v = values[i % values.len()];
+            i += 1;
+            v
+        }
+    }
+
+    /// Where the AMP layout puts each body's joint rotation (by body) and where the joint
+    /// velocities start (per DoF, in body order), read off the documented layout.
+    fn joint_offsets(model: &CharacterModel) -> (Vec<Option<usize>>, usize) {
+        let mut at = 13;
+        let mut rot = vec![None; model.bodies.len()];
+        for (i, b) in model.bodies.iter().enumerate() {
+            match b.joint {
+                JointKind::Ball { .. } => {
+                    rot[i] = Some(at);
+                    at += 6;
+                }
+                JointKind::Hinge { .. } => {
+                    rot[i] = Some(at);
+                    at += 1;
+                }
+                JointKind::Free | JointKind::Fixed => {}
+            }
+        }
+        (rot, at)
+    }
+
+    fn knee(model: &CharacterModel) -> (usize, usize, Vector) {
+        let shin = model.body_index("right_shin").expect("shin");
+        let JointKind::Hinge { dof } = model.bodies[shin].joint else {
+            panic!("the knee is a hinge");
+        };
+        let axis = Vector::from_array(model.dofs[dof].axis.map(|a| a as f32));
+        (shin, dof, axis)
+    }
+
+    #[test]
+    fn a_still_clip_has_zero_velocities_and_its_root_height() {
+        let m = CharacterModel::amp_humanoid();
+        let pose = still(
+            &m,
+            Vector::new(0.3, -1.0, 0.87),
+            Rotation::from_rotation_z(0.7),
+        );
+        let demo = DemoMotion::from_clips(&m, vec![("stand".into(), vec![pose; 6], DT)], window(3))
+            .expect("valid");
+        let mut rng = SplitMix64::new(1);
+        let rows = demo.sample_features(4, &mut || rng.unit());
+        let dim = amp_frame_dim(&m);
+        let (_, vel_start) = joint_offsets(&m);
+        assert_eq!(rows.len(), 4 * 3 * dim);
+        for f in rows.chunks(dim) {
+            assert!((f[0] - 0.87).abs() < 1e-6, "root height {}", f[0]);
+            assert!(f[7..13].iter().all(|v| v.abs() < 1e-5), "{:?}", &f[7..13]);
+            let joint_vel = &f[vel_start..vel_start + m.dofs.len()];
+            assert!(joint_vel.iter().all(|v| v.abs() < 1e-5), "{joint_vel:?}");
+        }
+    }
+
+    #[test]
+    fn a_gliding_root_has_its_velocity_in_the_heading_frame() {
+        // Facing +y while moving along world +x at v: in the heading frame that is -y.
+        let m = CharacterModel::amp_humanoid();
+        let v = 1.2;
+        let facing = Rotation::from_rotation_z(std::f32::consts::FRAC_PI_2);
+        let poses = (0..8)
+            .map(|k| still(&m, Vector::new(v * k as f32 * DT, 0.0, 0.9), facing))
+            .collect();
+        let demo = DemoMotion::from_clips(&m, vec![("glide".into(), poses, DT)], window(4))
+            .expect("valid");
+        let mut rng = SplitMix64::new(2);
+        let rows = demo.sample_features(3, &mut || rng.unit());
+        for f in rows.chunks(amp_frame_dim(&m)) {
+            let lin = Vector::new(f[7], f[8], f[9]);
+            assert!((lin - Vector::new(0.0, -v, 0.0)).length() < 1e-3, "{lin:?}");
+            assert!(f[10..13].iter().all(|w| w.abs() < 1e-4), "{:?}", &f[10..13]);
+        }
+    }
+
+    #[test]
+    fn between_frames_a_hinge_is_at_the_interpolated_angle() {
+        let m = CharacterModel::amp_humanoid();
+        let (shin, dof, axis) = knee(&m);
+        let root = still(&m, Vector::new(0.0, 0.0, 0.9), Rotation::IDENTITY);
+        let poses = (0..4)
+            .map(|k| {
+                let mut p = root.clone();
+                p.local_rots[shin] = Rotation::from_axis_angle(axis, 0.3 * k as f32);
+                p
+            })
+            .collect();
+        let demo =
+            DemoMotion::from_clips(&m, vec![("bend".into(), poses, DT)], window(2)).expect("valid");
+        assert!(
+            (twist_angle(demo.pose_at(0, 1.5 * DT).local_rots[shin], axis) - 0.45).abs() < 1e-5
+        );
+        // Slack is 3 frames - 1 frame: 0.75 of it starts the window halfway between frames 1, 2.
+        let row = demo.sample_features(1, &mut replay(vec![0.0, 0.75]));
+        let (rot, vel_start) = joint_offsets(&m);
+        let at = rot[shin].expect("the knee is in the layout");
+        let dim = amp_frame_dim(&m);
+        assert!((row[at] - 0.45).abs() < 1e-5, "{}", row[at]);
+        assert!((row[dim + at] - 0.75).abs() < 1e-5, "{}", row[dim + at]);
+        // Velocities are in body order, one per DoF: the knee's is its DoF's rank among them.
+        let rank = m
+            .bodies
+            .iter()
+            .take(shin)
+            .map(|b| match b.joint {
+                JointKind::Ball { .. } => 3,
+                JointKind::Hinge { .. } => 1,
+                _ => 0,
+            })
+            .sum::<usize>();
+        assert_eq!(m.dofs[dof].body, shin);
+        assert!((row[vel_start + rank] - 0.3 / DT).abs() < 1e-2);
+    }
+
+    #[test]
+    fn rows_are_amp_frames_of_the_motion_in_the_env_layout() {
+        // Root gliding along x and turning about z, right knee bending at a constant rate: the
+        // exact body states are known at any time, so each row must equal amp_frame on them.
+        let m = CharacterModel::amp_humanoid();
+        let (shin, _, axis) = knee(&m);
+        let (v, yaw_rate, knee_rate) = (0.8f32, 2.0f32, 3.0f32);
+        let pose = |t: f32| {
+            let mut p = still(
+                &m,
+                Vector::new(v * t, 0.0, 0.88),
+                Rotation::from_rotation_z(0.2 + yaw_rate * t),
+            );
+            p.local_rots[shin] = Rotation::from_axis_angle(axis, 0.1 + knee_rate * t);
+            p
+        };
+        let exact = |t: f32| -> Vec<BodyState> {
+            let world = forward_kinematics(&m, &pose(t));
+            let below_knee = |mut i: usize| loop {
+                if i == shin {
+                    return true;
+                }
+                match m.bodies[i].parent {
+                    Some(p) => i = p,
+                    None => return false,
+                }
+            };
+            let thigh = m.bodies[shin].parent.expect("thigh");
+            world
+                .iter()
+                .enumerate()
+                .map(|(i, &(pos, rot))| {
+                    let mut angvel = Vector::Z * yaw_rate;
+                    if below_knee(i) {
+                        angvel += world[thigh].1 * axis * knee_rate;
+                    }
+                    BodyState {
+                        pos,
+                        rot,
+                        // Only the root's enters the features; its centre of mass lies on the
+                        // yaw axis, so turning adds nothing.
+                        linvel: Vector::X * v,
+                        angvel,
+                    }
+                })
+                .collect()
+        };
+        let poses = (0..12).map(|k| pose(k as f32 * DT)).collect();
+        let w = window(5);
+        let demo = DemoMotion::from_clips(&m, vec![("turn".into(), poses, DT)], w).expect("valid");
+        let u = 0.37;
+        let row = demo.sample_features(1, &mut replay(vec![0.5, u]));
+        assert_eq!(row.len(), demo.feature_dim());
+        assert_eq!(demo.feature_dim(), 5 * amp_frame_dim(&m));
+        let start = u as f32 * (11.0 * DT - w.span_s());
+        let expected: Vec<f32> = (0..5)
+            .flat_map(|k| amp_frame(&m, &exact(start + k as f32 * DT)))
+            .collect();
+        let worst = row
+            .iter()
+            .zip(&expected)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 2e-3, "largest difference {worst}");
+    }
+
+    #[test]
+    fn clips_are_picked_in_proportion_to_their_duration() {
+        let m = CharacterModel::amp_humanoid();
+        let clip = |z: f32, frames: usize| {
+            vec![still(&m, Vector::new(0.0, 0.0, z), Rotation::IDENTITY); frames]
+        };
+        let demo = DemoMotion::from_clips(
+            &m,
+            vec![
+                ("short".into(), clip(0.8, 11), DT),
+                ("long".into(), clip(0.9, 31), DT),
+            ],
+            window(1),
+        )
+        .expect("valid");
+        let mut rng = SplitMix64::new(3);
+        let rows = demo.sample_features(400, &mut || rng.unit());
+        let long = rows
+            .chunks(amp_frame_dim(&m))
+            .filter(|f| f[0] > 0.85)
+            .count();
+        assert!(
+            (250..350).contains(&long),
+            "{long} of 400 from the 3x longer clip"
+        );
+    }
+
+    #[test]
+    fn bad_clips_are_refused_by_name() {
+        let m = CharacterModel::amp_humanoid();
+        let pose = still(&m, Vector::new(0.0, 0.0, 0.9), Rotation::IDENTITY);
+        let e = DemoMotion::from_clips(
+            &m,
+            vec![("hop".into(), vec![pose.clone(); 3], DT)],
+            AmpWindow::default(),
+        )
+        .expect_err("2 frames cannot hold a 10-frame window")
+        .to_string();
+        assert!(
+            e.contains("hop") && e.contains("10-frame AMP window"),
+            "{e}"
+        );
+        // Exactly as long as the window is enough.
+        assert!(DemoMotion::from_clips(
+            &m,
+            vec![("ok".into(), vec![pose.clone(); 10], DT)],
+            window(10)
+        )
+        .is_ok());
+        let mut wrong = pose.clone();
+        wrong.local_rots.pop();
+        let e = DemoMotion::from_clips(&m, vec![("odd".into(), vec![wrong; 3], DT)], window(1))
+            .expect_err("another model")
+            .to_string();
+        assert!(e.contains("odd") && e.contains("body rotations"), "{e}");
+        assert!(
+            DemoMotion::from_clips(&m, vec![("one".into(), vec![pose; 1], DT)], window(1)).is_err()
+        );
+        assert!(DemoMotion::from_clips(&m, vec![], window(1)).is_err());
+    }
+
+    #[test]
+    fn load_dir_reads_installed_deepmimic_clips() {
+        let m = CharacterModel::amp_humanoid();
+        let e = DemoMotion::load_dir(&m, Path::new("/nonexistent/lhm-motions"), window(2))
+            .expect_err("not installed")
+            .to_string();
+        assert!(e.contains("scripts/install-motions"), "{e}");
+
+        let dir = std::env::temp_dir().join(format!("lhm-demo-motion-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("deepmimic")).expect("dir");
+        std::fs::write(dir.join("MANIFEST"), "").expect("manifest");
+        let frame = |x: f64| {
+            let mut f = vec![1.0 / 30.0, x, 0.85, 0.0, 1.0, 0.0, 0.0, 0.0];
+            for (_, len) in super::super::deepmimic::JOINTS {
+                f.extend(if len == 4 {
+                    vec![1.0, 0.0, 0.0, 0.0]
+                } else {
+                    vec![0.0]
+                });
+            }
+            f
+        };
+        let frames: Vec<_> = (0..12).map(|k| frame(0.05 * f64::from(k))).collect();
+        let json = serde_json::json!({"Loop": "none", "Frames": frames}).to_string();
+        std::fs::write(dir.join("deepmimic/walk.txt"), json).expect("write");
+        let demo = DemoMotion::load_dir(&m, &dir, AmpWindow::default());
+        std::fs::remove_dir_all(&dir).ok();
+        let demo = demo.expect("loads");
+        assert_eq!(demo.clips().map(|(n, _)| n).collect::<Vec<_>>(), ["walk"]);
+        let row = demo.sample_features(1, &mut replay(vec![0.5]));
+        assert_eq!(row.len(), 10 * amp_frame_dim(&m));
+        // DeepMimic x is ours: 1.5 m/s forward, facing +x.
+        assert!(
+            (row[7] - 1.5).abs() < 1e-3 && (row[0] - 0.85).abs() < 1e-5,
+            "{:?}",
+            &row[..10]
+        );
+    }
+}
