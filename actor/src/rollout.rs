@@ -15,6 +15,8 @@ use lhm_sim::env::TaskEnv;
 use lhm_sim::CharacterModel;
 
 use lhm_cluster::RunSpec;
+use lhm_protos::EpisodeFrames;
+use lhm_record::capture::{EpisodeCapture, EpisodeSource};
 
 #[derive(Debug, thiserror::Error)]
 pub enum RolloutError {
@@ -57,6 +59,8 @@ pub struct StepOutput {
     pub poisoned_chunks: u64,
     /// Episodes that ended on this step.
     pub finished: Vec<(usize, EpisodeStats)>,
+    /// The poses of a sampled episode that ended on this step (for recording).
+    pub episode_frames: Option<EpisodeFrames>,
 }
 
 pub struct Rollout {
@@ -71,6 +75,10 @@ pub struct Rollout {
     role: Role,
     chunk_seq: u64,
     pub env_steps: u64,
+    /// Episodes environment 0 has finished; every `record_every_episodes`-th one is captured.
+    env0_episodes: u64,
+    capture: Option<EpisodeCapture>,
+    policy_version: u64,
 }
 
 impl Rollout {
@@ -120,6 +128,9 @@ impl Rollout {
             role,
             chunk_seq: 0,
             env_steps: 0,
+            env0_episodes: 0,
+            capture: None,
+            policy_version: 0,
             spec,
         };
         for _ in 0..num_envs.max(1) {
@@ -133,7 +144,24 @@ impl Rollout {
                 buf: ChunkBuf::default(),
             });
         }
+        rollout.maybe_start_capture();
         Ok(rollout)
+    }
+
+    /// Starts capturing environment 0's new episode if it is one of the sampled ones.
+    fn maybe_start_capture(&mut self) {
+        let every = u64::from(self.spec.record_every_episodes);
+        self.capture = (every > 0 && self.env0_episodes % every == 0).then(|| {
+            EpisodeCapture::new(
+                &self.slots[0].env,
+                EpisodeSource {
+                    run_id: self.run_id.clone(),
+                    actor_id: self.actor_id.clone(),
+                    role: self.role,
+                    policy_version: self.policy_version,
+                },
+            )
+        });
     }
 
     pub fn num_envs(&self) -> usize {
@@ -170,6 +198,7 @@ impl Rollout {
 
     /// One control step of every environment with `ac` (policy version `version`).
     pub fn step(&mut self, ac: &ActorCritic, version: u64) -> Result<StepOutput, RolloutError> {
+        self.policy_version = version;
         let obs: Vec<f32> = self.slots.iter().flat_map(|s| s.obs.clone()).collect();
         let act = ac.act(&obs, &mut self.rng)?;
         let act_dim = self.spec.act_dim;
@@ -200,6 +229,11 @@ impl Rollout {
             if result.physics_invalid {
                 buf.poisoned = true;
             }
+            if i == 0 {
+                if let Some(capture) = self.capture.as_mut() {
+                    capture.push(&slot.env);
+                }
+            }
             let ended = result.done || result.truncated || result.physics_invalid;
             if ended {
                 let cycles = &slot.env.cycles;
@@ -218,6 +252,13 @@ impl Rollout {
                     truncated_obs.push((i, slot.env.observation()));
                 }
                 slot.buf.episodes.push(stats.clone());
+                if i == 0 {
+                    if let Some(capture) = self.capture.take() {
+                        if !result.physics_invalid {
+                            out.episode_frames = Some(capture.finish(stats.clone()));
+                        }
+                    }
+                }
                 out.finished.push((i, stats));
             } else {
                 slot.obs = slot.env.observation();
@@ -241,6 +282,10 @@ impl Rollout {
             slot.env = env;
             slot.episode_return = 0.0;
             slot.episode_len = 0;
+            if i == 0 {
+                self.env0_episodes += 1;
+                self.maybe_start_capture();
+            }
         }
         if self.slots[0].buf.rewards.len() >= self.spec.chunk_steps as usize {
             self.emit_chunks(ac, version, &mut out)?;

@@ -160,6 +160,7 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
         .wait()
         .map_err(zerr)?;
     let metrics_key = keys::metrics(&config.run_id, &config.actor_id);
+    let episode_key = keys::episode(&config.run_id, config.role, &config.actor_id);
     let mut summary = ActorSummary {
         last_version: policy.version,
         ..ActorSummary::default()
@@ -196,6 +197,16 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
             }
         }
         let out = rollout.step(&policy.actor_critic, policy.version)?;
+        if let (true, Some(frames)) = (config.publish, out.episode_frames.as_ref()) {
+            // Sampled episodes are for people to look at: they may be dropped under congestion.
+            if let Ok(bytes) = frames.encode_checked() {
+                let _ = session
+                    .put(&episode_key, bytes)
+                    .congestion_control(CongestionControl::Drop)
+                    .priority(Priority::DataLow)
+                    .wait();
+            }
+        }
         summary.poisoned_chunks += out.poisoned_chunks;
         for chunk in out.chunks {
             if config.publish {

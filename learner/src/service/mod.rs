@@ -12,7 +12,9 @@ use std::time::{Duration, Instant};
 
 use lhm_cluster::{encode_policy, shutdown, Endpoints, NodeMode, RunSpec, TaskSet};
 use lhm_nets::ActorCriticConfig;
-use lhm_protos::{keys, Metrics, Role, TrajectoryChunk, WireMessage};
+use lhm_protos::{keys, EpisodeFrames, Metrics, Role, TrajectoryChunk, WireMessage};
+use lhm_record::{EpisodeScene, McapRecorder};
+use lhm_scenes::Benchmark;
 use lhm_sim::env::{EnvConfig, TaskEnv};
 use lhm_sim::{CharacterModel, SimConfig};
 use serde::{Deserialize, Serialize};
@@ -245,6 +247,92 @@ pub fn checkpoint_stem(run_dir: &Path) -> PathBuf {
     run_dir.join("checkpoint")
 }
 
+/// `run.mcap` for a new run; a resumed run records into `run.2.mcap`, `run.3.mcap`, … so that
+/// nothing already recorded is overwritten.
+pub fn recording_path(run_dir: &Path) -> PathBuf {
+    let first = run_dir.join("run.mcap");
+    if !first.exists() {
+        return first;
+    }
+    (2u32..)
+        .map(|k| run_dir.join(format!("run.{k}.mcap")))
+        .find(|p| !p.exists())
+        .unwrap_or(first)
+}
+
+/// The run's MCAP file: metrics, sampled episodes as Foxglove scenes, raw `lhm.v1` messages.
+/// Recording is for people; a failure to write is logged and stops recording, never training.
+struct RunRecording {
+    recorder: Option<McapRecorder>,
+    bench: Option<Benchmark>,
+    model: CharacterModel,
+}
+
+impl RunRecording {
+    fn open(path: PathBuf) -> Self {
+        let recorder = McapRecorder::create(&path)
+            .map_err(|e| tracing::warn!("not recording: {e}"))
+            .ok();
+        if recorder.is_some() {
+            tracing::info!("recording to {}", path.display());
+        }
+        Self {
+            recorder,
+            bench: Benchmark::embedded()
+                .map_err(|e| tracing::warn!("no scenes for recording: {e}"))
+                .ok(),
+            model: CharacterModel::amp_humanoid(),
+        }
+    }
+
+    fn with(
+        &mut self,
+        what: &str,
+        f: impl FnOnce(&mut McapRecorder) -> Result<(), lhm_record::RecordError>,
+    ) {
+        if let Some(r) = self.recorder.as_mut() {
+            if let Err(e) = f(r) {
+                tracing::warn!("recording {what} failed, recording stops: {e}");
+                self.recorder = None;
+            }
+        }
+    }
+
+    fn episode(&mut self, bytes: &[u8]) {
+        let frames = match EpisodeFrames::decode_checked(bytes) {
+            Ok(f) => f,
+            Err(e) => {
+                tracing::warn!("ignoring a sampled episode: {e}");
+                return;
+            }
+        };
+        let Some(task) = self.bench.as_ref().and_then(|b| b.task(&frames.task_id)) else {
+            tracing::warn!(
+                "ignoring a sampled episode of unknown task {:?}",
+                frames.task_id
+            );
+            return;
+        };
+        let Some(bench) = self.bench.as_ref() else {
+            return;
+        };
+        let scene = EpisodeScene::new(&self.model, &task.1, &bench.catalogue);
+        let now = unix_ns();
+        self.with("an episode", |r| {
+            r.write_wire("/lhm/episode", now, &frames)?;
+            r.write_episode(&frames, &scene, now)
+        });
+    }
+
+    fn finish(self) {
+        if let Some(r) = self.recorder {
+            if let Err(e) = r.finish() {
+                tracing::warn!("closing the recording: {e}");
+            }
+        }
+    }
+}
+
 /// Optional hooks into a learner run (recording, progress).
 #[derive(Default)]
 pub struct Hooks<'a> {
@@ -330,6 +418,11 @@ pub fn run_learner(
         .declare_subscriber(keys::trajectory_all(&config.run_id, role))
         .wait()
         .map_err(zerr)?;
+    let episode_sub = session
+        .declare_subscriber(keys::episode_all(&config.run_id, role))
+        .wait()
+        .map_err(zerr)?;
+    let mut recording = RunRecording::open(recording_path(&run_dir));
     let alive_sub = session
         .liveliness()
         .declare_subscriber(keys::status_all(&config.run_id))
@@ -428,6 +521,9 @@ pub fn run_learner(
                 }
             }
         }
+        while let Ok(Some(sample)) = episode_sub.try_recv() {
+            recording.episode(&sample.payload().to_bytes());
+        }
         let Ok(Some(sample)) = traj_sub.recv_timeout(Duration::from_millis(100)) else {
             continue;
         };
@@ -465,6 +561,12 @@ pub fn run_learner(
             lambda: learner.config.ppo.lambda,
         };
         let assembled = assemble(&chunks, learner.amp.as_ref(), gae)?;
+        if let Some(first) = chunks.first() {
+            // One raw chunk per iteration: enough to inspect what actors send, small enough to keep.
+            recording.with("a trajectory chunk", |r| {
+                r.write_wire("/lhm/trajectory", unix_ns(), first)
+            });
+        }
         let ppo_stats = learner
             .ppo
             .update(&mut learner.actor_critic, &assembled.batch)?;
@@ -528,6 +630,7 @@ pub fn run_learner(
         v.insert("intake/stale".into(), counters.stale as f64);
         v.insert("intake/rejected".into(), counters.rejected() as f64);
         v.insert("actors_alive".into(), alive.len() as f64);
+        recording.with("metrics", |r| r.write_metrics(&m));
         if let Ok(bytes) = m.encode_checked() {
             let _ = session
                 .put(keys::metrics(&config.run_id, "learner"), bytes)
@@ -570,8 +673,15 @@ pub fn run_learner(
         &last_episodes,
     );
     write_json_atomic(&status_path, &final_status)?;
+    recording.finish();
     let _ = session.close().wait();
     Ok(final_status)
+}
+
+fn unix_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
 }
 
 fn unix_ms() -> u64 {
