@@ -458,6 +458,9 @@ pub fn run_learner(
     let mut last_report: Option<IterationReport> = None;
     let mut last_episodes: Option<EpisodeSummaryJson> = None;
     let mut iteration_started = Instant::now();
+    let mut republish = false;
+    let mut last_status = Instant::now();
+    let mut last_republish = Instant::now();
     let status = |learner: &Learner,
                   counters: &IntakeCounters,
                   alive: &BTreeSet<String>,
@@ -513,6 +516,9 @@ pub fn run_learner(
                         tracing::info!("{process} joined ({} alive)", alive.len());
                     }
                     seen.insert(process.to_owned());
+                    // A (re)joining actor may have missed the last broadcast (e.g. it outlived a
+                    // learner restart and holds a newer version than the checkpoint): send again.
+                    republish = true;
                 }
                 SampleKind::Delete => {
                     if alive.remove(process) {
@@ -521,8 +527,30 @@ pub fn run_learner(
                 }
             }
         }
+        if republish && last_republish.elapsed() >= Duration::from_millis(500) {
+            let bytes = latest.lock().map(|b| b.clone()).unwrap_or_default();
+            weights_pub.put(bytes).wait().map_err(zerr)?;
+            republish = false;
+            last_republish = Instant::now();
+        }
         while let Ok(Some(sample)) = episode_sub.try_recv() {
             recording.episode(&sample.payload().to_bytes());
+        }
+        if last_status.elapsed() >= Duration::from_secs(1) {
+            // Between iterations too, so intake counters and who is alive are visible.
+            write_json_atomic(
+                &status_path,
+                &status(
+                    &learner,
+                    &counters,
+                    &alive,
+                    &seen,
+                    steps_used,
+                    &last_report,
+                    &last_episodes,
+                ),
+            )?;
+            last_status = Instant::now();
         }
         let Ok(Some(sample)) = traj_sub.recv_timeout(Duration::from_millis(100)) else {
             continue;
@@ -542,7 +570,12 @@ pub fn run_learner(
                 pending.push(*chunk);
             }
             Intake::Stale { version } => {
-                tracing::debug!("dropped a chunk of policy version {version}")
+                tracing::debug!("dropped a chunk of policy version {version}");
+                if version > learner.counters.iteration {
+                    // Made by weights this learner never published (it restarted from an older
+                    // checkpoint): that actor needs the current ones.
+                    republish = true;
+                }
             }
             Intake::Rejected(why) => {
                 tracing::warn!("rejected a message on the trajectory key: {why}")

@@ -1,0 +1,218 @@
+//! Helpers for the end-to-end tests: start `lhm` processes on loopback, read the learner's
+//! `status.json`, wait for conditions, and never leave a process behind.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The `lhm` binary next to the test executable (`cargo test --workspace` builds it).
+pub fn lhm() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test> → target/<profile>/lhm
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target directory");
+    let bin = dir.join("lhm");
+    assert!(
+        bin.is_file(),
+        "{} not found: run the tests with `cargo test --workspace` so the lhm binary is built",
+        bin.display()
+    );
+    bin
+}
+
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free loopback port")
+        .port()
+}
+
+/// A fresh directory for one test's runs.
+pub fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("lhm-e2e-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+/// A small, fast run: 64-64 networks, 256-step batches of 16-step chunks, a checkpoint every 2
+/// iterations.
+pub fn write_config(dir: &Path) -> PathBuf {
+    let path = dir.join("train.toml");
+    std::fs::write(
+        &path,
+        r#"run_id = "e2e"
+batch_steps = 256
+chunk_steps = 16
+checkpoint_every = 2
+record_every_episodes = 4
+
+[network.policy.mlp]
+hidden = [64, 64]
+
+[network.value]
+hidden = [64, 64]
+
+[ppo]
+epochs = 2
+minibatch_size = 128
+"#,
+    )
+    .expect("writing the config");
+    path
+}
+
+/// A child process killed (SIGKILL) when dropped, so a failing test leaves nothing running.
+pub struct Proc {
+    pub child: Child,
+    pub name: String,
+}
+
+impl Proc {
+    pub fn pid(&self) -> i32 {
+        self.child.id() as i32
+    }
+
+    pub fn signal(&self, sig: i32) {
+        // SAFETY: kill(2) on our own child.
+        unsafe {
+            libc::kill(self.pid(), sig);
+        }
+    }
+
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+
+    /// Waits for the process to exit; its exit status, or `None` on timeout.
+    pub fn wait_exit(&mut self, timeout: Duration) -> Option<std::process::ExitStatus> {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                return Some(status);
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        None
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn spawn(name: &str, args: &[String], log: &Path) -> Proc {
+    let file = std::fs::File::create(log).expect("log file");
+    let err = file.try_clone().expect("log file");
+    let child = Command::new(lhm())
+        .args(args)
+        .env("RUST_LOG", "info")
+        .stdin(Stdio::null())
+        .stdout(file)
+        .stderr(err)
+        .spawn()
+        .unwrap_or_else(|e| panic!("starting {name}: {e}"));
+    Proc {
+        child,
+        name: name.to_owned(),
+    }
+}
+
+pub fn start_learner(dir: &Path, config: &Path, port: u16, log_name: &str) -> Proc {
+    let args: Vec<String> = [
+        "learner",
+        "--listen",
+        &format!("tcp/127.0.0.1:{port}"),
+        "--config",
+        &config.display().to_string(),
+        "--runs-dir",
+        &dir.join("runs").display().to_string(),
+        "--no-amp",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    spawn("learner", &args, &dir.join(log_name))
+}
+
+pub fn start_actor(dir: &Path, port: u16, id: &str, seed: u64) -> Proc {
+    let args: Vec<String> = [
+        "actor",
+        "--connect",
+        &format!("tcp/127.0.0.1:{port}"),
+        "--run-id",
+        "e2e",
+        "--envs",
+        "2",
+        "--seed",
+        &seed.to_string(),
+        "--actor-id",
+        id,
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    spawn(id, &args, &dir.join(format!("{id}.log")))
+}
+
+/// The learner's `status.json` (`Null` until it exists and parses).
+pub fn status(dir: &Path) -> serde_json::Value {
+    std::fs::read(dir.join("runs/e2e/status.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok())
+        .unwrap_or(serde_json::Value::Null)
+}
+
+pub fn u64_at(v: &serde_json::Value, pointer: &str) -> u64 {
+    v.pointer(pointer).and_then(|x| x.as_u64()).unwrap_or(0)
+}
+
+pub fn alive(v: &serde_json::Value) -> Vec<String> {
+    v.pointer("/actors_alive")
+        .and_then(|a| a.as_array())
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_str().map(str::to_owned))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Polls `status.json` until `cond` holds; panics with the last status and the logs on timeout.
+pub fn wait_for(
+    dir: &Path,
+    what: &str,
+    timeout: Duration,
+    mut cond: impl FnMut(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let deadline = Instant::now() + timeout;
+    loop {
+        let s = status(dir);
+        if cond(&s) {
+            return s;
+        }
+        if Instant::now() > deadline {
+            let mut logs = String::new();
+            if let Ok(entries) = std::fs::read_dir(dir) {
+                for e in entries.flatten() {
+                    if e.path().extension().is_some_and(|x| x == "log") {
+                        let text = std::fs::read_to_string(e.path()).unwrap_or_default();
+                        let tail: Vec<&str> = text.lines().rev().take(15).collect();
+                        logs.push_str(&format!(
+                            "\n--- {} ---\n{}",
+                            e.path().display(),
+                            tail.into_iter().rev().collect::<Vec<_>>().join("\n")
+                        ));
+                    }
+                }
+            }
+            panic!("timed out waiting for {what}; last status: {s:#}{logs}");
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}

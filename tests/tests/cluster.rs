@@ -1,0 +1,199 @@
+//! The actor–learner service across real processes on loopback (DESIGN.md §3): the policy
+//! version advances with two actors; a SIGKILLed actor costs nothing but its unfinished chunk;
+//! a SIGKILLed learner resumes from its checkpoint and the running actors come back to it;
+//! garbage on the trajectory key is rejected and counted.
+
+use std::time::Duration;
+
+use lhm_e2e::*;
+use lhm_protos::{keys, prost::Message, Role, TrajectoryChunk, WireMessage};
+use zenoh::Wait;
+
+const LONG: Duration = Duration::from_secs(240);
+const CHUNK_STEPS: u64 = 16;
+
+#[test]
+fn two_actors_advance_the_policy_version() {
+    let dir = scratch_dir("two-actors");
+    let config = write_config(&dir);
+    let port = free_port();
+    let mut learner = start_learner(&dir, &config, port, "learner.log");
+    let _a = start_actor(&dir, port, "a0", 1);
+    let _b = start_actor(&dir, port, "a1", 2);
+    let s = wait_for(&dir, "3 iterations with both actors", LONG, |s| {
+        u64_at(s, "/iteration") >= 3 && u64_at(s, "/actors_seen") >= 2
+    });
+    assert_eq!(u64_at(&s, "/intake/malformed"), 0);
+    assert_eq!(u64_at(&s, "/intake/invalid"), 0);
+    assert!(u64_at(&s, "/steps_used") >= 3 * 256, "{s:#}");
+    // SIGTERM: the learner checkpoints and exits cleanly.
+    learner.signal(libc::SIGTERM);
+    let exit = learner
+        .wait_exit(Duration::from_secs(60))
+        .expect("learner exits");
+    assert!(exit.success(), "learner exit {exit:?}");
+    let meta: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.join("runs/e2e/checkpoint.json")).expect("checkpoint written"),
+    )
+    .unwrap();
+    let final_iteration = u64_at(&status(&dir), "/iteration");
+    assert_eq!(
+        u64_at(&meta, "/payload/counters/iteration"),
+        final_iteration,
+        "the checkpoint on SIGTERM holds the last iteration"
+    );
+    assert!(dir.join("runs/e2e/run.mcap").is_file());
+}
+
+#[test]
+fn a_killed_actor_costs_only_its_unfinished_chunk() {
+    let dir = scratch_dir("kill-actor");
+    let config = write_config(&dir);
+    let port = free_port();
+    let _learner = start_learner(&dir, &config, port, "learner.log");
+    let mut victim = start_actor(&dir, port, "victim", 3);
+    let _survivor = start_actor(&dir, port, "survivor", 4);
+    let before = wait_for(&dir, "2 iterations", LONG, |s| {
+        u64_at(s, "/iteration") >= 2 && alive(s).len() == 2
+    });
+    // Mid-chunk with near certainty: a chunk is 16 steps of 2 environments (~50 ms of work).
+    std::thread::sleep(Duration::from_millis(137));
+    victim.signal(libc::SIGKILL);
+    victim.wait_exit(Duration::from_secs(10));
+    let it0 = u64_at(&before, "/iteration");
+    let after = wait_for(&dir, "training to go on with the survivor", LONG, |s| {
+        u64_at(s, "/iteration") >= it0 + 3 && alive(s) == ["survivor"]
+    });
+    // Count check: every accepted chunk was whole, nothing was rejected, and updates used only
+    // accepted steps.
+    let accepted = u64_at(&after, "/intake/accepted");
+    assert_eq!(
+        u64_at(&after, "/intake/accepted_steps"),
+        accepted * CHUNK_STEPS
+    );
+    assert_eq!(u64_at(&after, "/intake/malformed"), 0, "{after:#}");
+    assert_eq!(u64_at(&after, "/intake/invalid"), 0, "{after:#}");
+    assert_eq!(u64_at(&after, "/intake/wrong_version"), 0, "{after:#}");
+    assert!(u64_at(&after, "/steps_used") <= u64_at(&after, "/intake/accepted_steps"));
+}
+
+#[test]
+fn a_restarted_learner_resumes_and_running_actors_reconnect() {
+    let dir = scratch_dir("restart-learner");
+    let config = write_config(&dir);
+    let port = free_port();
+    let mut learner = start_learner(&dir, &config, port, "learner-1.log");
+    let mut actor = start_actor(&dir, port, "steady", 5);
+    wait_for(&dir, "a checkpoint (iteration 3)", LONG, |s| {
+        u64_at(s, "/iteration") >= 3
+    });
+    learner.signal(libc::SIGKILL);
+    learner.wait_exit(Duration::from_secs(10));
+    let meta: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.join("runs/e2e/checkpoint.json")).expect("a checkpoint exists"),
+    )
+    .unwrap();
+    let checkpointed = u64_at(&meta, "/payload/counters/iteration");
+    assert!(
+        checkpointed >= 2,
+        "checkpoint every 2 iterations: {checkpointed}"
+    );
+
+    let _learner = start_learner(&dir, &config, port, "learner-2.log");
+    let resumed = wait_for(&dir, "the restarted learner", LONG, |s| {
+        s.pointer("/resumed_from_iteration")
+            .is_some_and(|v| !v.is_null())
+    });
+    assert_eq!(u64_at(&resumed, "/resumed_from_iteration"), checkpointed);
+    wait_for(
+        &dir,
+        "training to continue with the same actor",
+        LONG,
+        |s| u64_at(s, "/iteration") >= checkpointed + 2 && alive(s) == ["steady"],
+    );
+    assert!(actor.is_running(), "the actor was never restarted");
+}
+
+fn chunk(version: u64) -> TrajectoryChunk {
+    let n = 2u32;
+    TrajectoryChunk {
+        run_id: "e2e".into(),
+        actor_id: "intruder".into(),
+        role: Role::Teacher1 as i32,
+        policy_version: version,
+        num_steps: n,
+        obs_dim: 3,
+        act_dim: 1,
+        observations: vec![0.0; 6],
+        actions: vec![0.0; 2],
+        log_probs: vec![0.0; 2],
+        values: vec![0.0; 2],
+        rewards: vec![0.0; 2],
+        dones: vec![false; 2],
+        truncated: vec![false; 2],
+        truncation_values: vec![0.0; 2],
+        ..TrajectoryChunk::versioned()
+    }
+}
+
+#[test]
+fn malformed_and_wrong_version_messages_are_rejected_and_counted() {
+    let dir = scratch_dir("garbage");
+    let config = write_config(&dir);
+    let port = free_port();
+    let mut learner = start_learner(&dir, &config, port, "learner.log");
+    wait_for(&dir, "the learner", LONG, |s| !s.is_null());
+
+    let mut zconfig = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"client\"".to_string()),
+        ("scouting/multicast/enabled", "false".into()),
+        ("connect/endpoints", format!("[\"tcp/127.0.0.1:{port}\"]")),
+    ] {
+        zconfig.insert_json5(k, &v).unwrap();
+    }
+    let session = zenoh::open(zconfig).wait().expect("connect to the learner");
+    let key = keys::trajectory("e2e", Role::Teacher1, "intruder");
+    let put = |bytes: Vec<u8>| {
+        session
+            .put(&key, bytes)
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .wait()
+            .unwrap()
+    };
+    // Not protobuf at all; truncated protobuf.
+    put(vec![0xff; 64]);
+    put(chunk(0).encode_checked().unwrap()[..9].to_vec());
+    // Another schema version.
+    let mut future = chunk(0);
+    future.schema_version = 99;
+    put(future.encode_to_vec());
+    // Shapes that do not add up; NaN rewards.
+    let mut ragged = chunk(0);
+    ragged.rewards.pop();
+    put(ragged.encode_to_vec());
+    let mut nan = chunk(0);
+    nan.rewards[0] = f32::NAN;
+    put(nan.encode_to_vec());
+    // Well-formed, but not this run's network.
+    put(chunk(0).encode_to_vec());
+
+    let s = wait_for(
+        &dir,
+        "every message counted",
+        Duration::from_secs(60),
+        |s| {
+            u64_at(s, "/intake/malformed")
+                + u64_at(s, "/intake/wrong_version")
+                + u64_at(s, "/intake/invalid")
+                + u64_at(s, "/intake/mismatched")
+                >= 6
+        },
+    );
+    assert_eq!(u64_at(&s, "/intake/wrong_version"), 1, "{s:#}");
+    assert_eq!(u64_at(&s, "/intake/invalid"), 2, "{s:#}");
+    assert_eq!(u64_at(&s, "/intake/mismatched"), 1, "{s:#}");
+    assert_eq!(u64_at(&s, "/intake/malformed"), 2, "{s:#}");
+    assert_eq!(u64_at(&s, "/intake/accepted"), 0);
+    assert!(learner.is_running(), "the learner survived");
+}
