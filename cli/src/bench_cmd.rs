@@ -47,6 +47,21 @@ enum BenchCommand {
         #[arg(long, default_value_t = 7)]
         repetitions: usize,
     },
+    /// Distributed layer: actor env steps/s with and without publishing, one vs two actor
+    /// processes, and weight-broadcast latency (p50/p99) of the default network.
+    Cluster {
+        #[arg(long)]
+        json: bool,
+        /// Environments per actor process.
+        #[arg(long, default_value_t = 16)]
+        envs: usize,
+        /// Chunks each actor sends per measurement (a chunk is 32 steps of one environment).
+        #[arg(long, default_value_t = 256)]
+        chunks: u64,
+        /// Timed weight broadcasts.
+        #[arg(long, default_value_t = 30)]
+        broadcasts: usize,
+    },
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
@@ -96,6 +111,35 @@ pub fn run(args: BenchArgs) -> Result<()> {
                     r.threads_all_cores,
                     r.repetitions,
                     r.steps_per_repetition
+                );
+            }
+            Ok(())
+        }
+        BenchCommand::Cluster {
+            json,
+            envs,
+            chunks,
+            broadcasts,
+        } => {
+            let r = crate::cluster_bench::run(envs.max(1), chunks.max(1), broadcasts.max(1))?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                println!(
+                    "actor ({} envs): {:.0} env steps/s publishing, {:.0} without ({:.1}% overhead)\n\
+                     two actor processes: {:.0} env steps/s ({:.2}x one)\n\
+                     weights {:?} ({:.1} MB): broadcast p50 {:.1} ms, p99 {:.1} ms over {} puts",
+                    r.envs_per_actor,
+                    r.actor_env_steps_per_s_publish,
+                    r.actor_env_steps_per_s_no_publish,
+                    r.publish_overhead_percent,
+                    r.two_actors_env_steps_per_s,
+                    r.scaling_two_vs_one,
+                    r.network_hidden,
+                    r.weights_bytes as f64 / 1e6,
+                    r.weight_broadcast_ms_p50,
+                    r.weight_broadcast_ms_p99,
+                    r.weight_broadcast_samples
                 );
             }
             Ok(())

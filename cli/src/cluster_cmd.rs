@@ -120,6 +120,12 @@ pub struct ActorArgs {
     /// Stop after sending this many chunks.
     #[arg(long)]
     max_chunks: Option<u64>,
+    /// Simulate and build chunks without sending them (the benchmark's baseline).
+    #[arg(long, hide = true)]
+    no_publish: bool,
+    /// Print the actor's summary as one JSON line on stdout when it stops.
+    #[arg(long, hide = true)]
+    summary_json: bool,
     #[arg(long)]
     zenoh_config: Option<PathBuf>,
 }
@@ -302,11 +308,22 @@ pub fn actor(args: ActorArgs) -> Result<()> {
         envs: args.envs.max(1),
         seed: args.seed,
         max_chunks: args.max_chunks,
-        publish: true,
+        publish: !args.no_publish,
     };
     match run_actor(&config) {
         Ok(summary) => {
             tracing::info!("{summary:?}");
+            if args.summary_json {
+                println!(
+                    "{}",
+                    serde_json::json!({
+                        "chunks_sent": summary.chunks_sent,
+                        "env_steps": summary.env_steps,
+                        "busy_s": summary.busy_s,
+                        "env_steps_per_s": summary.env_steps as f64 / summary.busy_s.max(1e-9),
+                    })
+                );
+            }
             Ok(())
         }
         Err(lhm_actor::service::ActorError::NoWeights) if shutdown::requested() => Ok(()),

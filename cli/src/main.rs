@@ -2,9 +2,11 @@
 //! the library crates.
 
 mod bench_cmd;
+mod cluster_bench;
 mod cluster_cmd;
 mod demo;
 mod motion_cmd;
+mod record_cmd;
 mod render_cmd;
 mod scenes_cmd;
 
@@ -32,6 +34,8 @@ enum Command {
     Actor(cluster_cmd::ActorArgs),
     /// The benchmark: generate, validate, summarise and draw its tasks.
     Scenes(scenes_cmd::ScenesArgs),
+    /// Record one episode of a trained policy as MCAP (opens in Foxglove).
+    Record(record_cmd::RecordArgs),
     /// Throughput benchmarks (results go in BENCHMARKS.md).
     Bench(bench_cmd::BenchArgs),
     /// Reference motion clips for AMP.
@@ -66,6 +70,7 @@ fn main() -> ExitCode {
         Command::Train(args) => cluster_cmd::train(args).map(|()| ExitCode::SUCCESS),
         Command::Learner(args) => cluster_cmd::learner(args).map(|()| ExitCode::SUCCESS),
         Command::Actor(args) => cluster_cmd::actor(args).map(|()| ExitCode::SUCCESS),
+        Command::Record(args) => record_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Scenes(args) => scenes_cmd::run(args),
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Motion(args) => motion_cmd::run(args).map(|()| ExitCode::SUCCESS),

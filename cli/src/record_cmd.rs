@@ -1,0 +1,136 @@
+//! `lhm record TASK_ID --policy CKPT -o episode.mcap`: one episode of a trained policy in a
+//! benchmark room, written as an MCAP file that opens in Foxglove (scene, transforms, the raw
+//! `lhm.v1.EpisodeFrames`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::ProgressBar;
+use lhm_learner::service::TrainConfig;
+use lhm_learner::Learner;
+use lhm_nets::SplitMix64;
+use lhm_protos::{EpisodeStats, Role};
+use lhm_record::capture::{EpisodeCapture, EpisodeSource};
+use lhm_record::{record_episode, EpisodeScene};
+use lhm_scenes::Benchmark;
+use lhm_sim::env::TaskEnv;
+use lhm_sim::CharacterModel;
+
+#[derive(Args)]
+pub struct RecordArgs {
+    /// Benchmark task id (e.g. train-0002, or train-0002.p1 for its first pair alone).
+    task: String,
+    /// Learner checkpoint: `runs/<run>/checkpoint` (with or without .json / .safetensors).
+    #[arg(long)]
+    policy: PathBuf,
+    /// The run's training config, if it changed the environment settings.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Sample actions instead of taking the policy's mean.
+    #[arg(long)]
+    stochastic: bool,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output MCAP file.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+fn checkpoint_stem(path: &Path) -> PathBuf {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("json" | "safetensors") => path.with_extension(""),
+        _ => path.to_owned(),
+    }
+}
+
+pub fn run(args: RecordArgs) -> Result<()> {
+    let config = match &args.config {
+        Some(path) => TrainConfig::from_toml_file(path)?,
+        None => TrainConfig::default(),
+    };
+    let stem = checkpoint_stem(&args.policy);
+    let learner = Learner::load(&stem, None)
+        .with_context(|| format!("loading the policy {}", stem.display()))?;
+    let bench = Benchmark::embedded()?;
+    let (_, task) = bench
+        .task(&args.task)
+        .with_context(|| format!("no task {:?} (see `lhm scenes stats`)", args.task))?;
+    let model = CharacterModel::amp_humanoid();
+    let mut env = TaskEnv::new(
+        &model,
+        &task,
+        &bench.catalogue,
+        config.sim.clone(),
+        config.env.clone(),
+    );
+    let ac = &learner.actor_critic;
+    if ac.obs_dim() != TaskEnv::obs_dim(&model, &config.env) || ac.act_dim() != model.dofs.len() {
+        bail!(
+            "{} takes {} observations and gives {} actions; this environment has {} and {} \
+             (pass the run's --config)",
+            stem.display(),
+            ac.obs_dim(),
+            ac.act_dim(),
+            TaskEnv::obs_dim(&model, &config.env),
+            model.dofs.len()
+        );
+    }
+    let mut capture = EpisodeCapture::new(
+        &env,
+        EpisodeSource {
+            run_id: "record".into(),
+            actor_id: "lhm-record".into(),
+            role: Role::Teacher1,
+            policy_version: learner.counters.iteration,
+        },
+    );
+    let mut rng = SplitMix64::new(args.seed);
+    let bar = ProgressBar::new(u64::from(config.env.max_episode_steps));
+    let (mut ret, mut len) = (0f32, 0u32);
+    let last = loop {
+        let obs = env.observation();
+        let action = if args.stochastic {
+            ac.act(&obs, &mut rng)?.actions
+        } else {
+            ac.act_deterministic(&obs)?
+        };
+        let r = env.step(&action);
+        capture.push(&env);
+        ret += r.reward;
+        len += 1;
+        bar.inc(1);
+        if r.done || r.truncated {
+            break r;
+        }
+    };
+    bar.finish_and_clear();
+    let errors = env.placement_errors();
+    let stats = EpisodeStats {
+        episode_return: ret,
+        length: len,
+        cycles_attempted: errors.len() as u32,
+        cycles_succeeded: env.cycles.results.iter().filter(|r| r.success).count() as u32,
+        final_placement_error_m: errors,
+        fell: last.fell,
+        physics_invalid: last.physics_invalid,
+        task_id: task.id.clone(),
+    };
+    let frames = capture.finish(stats.clone());
+    record_episode(
+        &args.output,
+        &frames,
+        &EpisodeScene::new(&model, &task, &bench.catalogue),
+    )?;
+    println!(
+        "{}: {} steps, return {:.2}, {}/{} pairs placed{} → {}",
+        task.id,
+        len,
+        ret,
+        stats.cycles_succeeded,
+        stats.cycles_attempted,
+        if stats.fell { ", fell" } else { "" },
+        args.output.display()
+    );
+    Ok(())
+}
