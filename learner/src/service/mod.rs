@@ -60,13 +60,22 @@ pub struct TrainConfig {
 impl Default for TrainConfig {
     fn default() -> Self {
         // CPU-sized defaults (the laptop path): 512-256 networks, 4096-step batches.
-        let mut ppo = PpoConfig::default();
-        ppo.minibatch_size = 1024;
-        ppo.epochs = 4;
-        ppo.adam.lr = 5e-5;
-        let mut amp = AmpConfig::default();
-        amp.disc.hidden = vec![512, 256];
-        amp.minibatch_size = 1024;
+        let defaults = PpoConfig::default();
+        let ppo = PpoConfig {
+            minibatch_size: 1024,
+            epochs: 4,
+            adam: lhm_nets::AdamConfig {
+                lr: 5e-5,
+                ..defaults.adam.clone()
+            },
+            ..defaults
+        };
+        let amp_defaults = AmpConfig::default();
+        let amp = AmpConfig {
+            disc: lhm_nets::MlpConfig::cpu_preset(),
+            minibatch_size: 1024,
+            ..amp_defaults
+        };
         Self {
             run_id: "teacher1".into(),
             role: "teacher1".into(),
@@ -333,10 +342,13 @@ impl RunRecording {
     }
 }
 
+/// Called after every iteration.
+pub type IterationHook<'a> = Box<dyn FnMut(&IterationReport) + 'a>;
+
 /// Optional hooks into a learner run (recording, progress).
 #[derive(Default)]
 pub struct Hooks<'a> {
-    pub on_iteration: Option<Box<dyn FnMut(&IterationReport) + 'a>>,
+    pub on_iteration: Option<IterationHook<'a>>,
     /// Called once the session is up and listening (e.g. to start local actors).
     pub on_listening: Option<Box<dyn FnMut() + 'a>>,
 }
