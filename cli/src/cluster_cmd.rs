@@ -61,14 +61,14 @@ impl LearnerOpts {
             config.batch_steps = n;
         }
         if self.no_amp {
-            config.amp = None;
+            config.amp_enabled = false;
         }
         keys::check_chunk("run id", &config.run_id)?;
         Ok(config)
     }
 
     fn demo(&self, config: &TrainConfig) -> Result<Option<Box<dyn DemoSource>>> {
-        if config.amp.is_none() {
+        if !config.amp_enabled {
             return Ok(None);
         }
         crate::demo::load(self.motion_dir.clone(), config).map(Some)

@@ -48,8 +48,9 @@ pub struct TrainConfig {
     pub max_iterations: Option<u64>,
     pub network: ActorCriticConfig,
     pub ppo: PpoConfig,
-    /// `None`: PPO on the task reward only.
-    pub amp: Option<AmpConfig>,
+    /// `false`: PPO on the task reward only (no discriminator, no motion clips needed).
+    pub amp_enabled: bool,
+    pub amp: AmpConfig,
     pub env: EnvConfig,
     pub sim: SimConfig,
     pub tasks: TaskSet,
@@ -86,7 +87,8 @@ impl Default for TrainConfig {
             max_iterations: None,
             network: ActorCriticConfig::with_hidden(&[512, 256]),
             ppo,
-            amp: Some(amp),
+            amp_enabled: true,
+            amp,
             env: EnvConfig::default(),
             sim: SimConfig::default(),
             tasks: TaskSet::TrainSingleObject,
@@ -116,7 +118,7 @@ impl TrainConfig {
         RunSpec {
             obs_dim: TaskEnv::obs_dim(&model, &self.env),
             act_dim: model.dofs.len(),
-            amp_dim: if self.amp.is_some() {
+            amp_dim: if self.amp_enabled {
                 TaskEnv::amp_dim(&model, &self.env)
             } else {
                 0
@@ -137,9 +139,9 @@ impl TrainConfig {
             act_dim: spec.act_dim,
             actor_critic: self.network.clone(),
             ppo: self.ppo.clone(),
-            amp: self.amp.clone().map(|config| AmpSetup {
+            amp: self.amp_enabled.then(|| AmpSetup {
+                config: self.amp.clone(),
                 feature_dim: spec.amp_dim,
-                config,
             }),
         }
     }
@@ -362,7 +364,7 @@ pub fn run_learner(
 ) -> Result<LearnerStatus, ServiceError> {
     let role = config.role()?;
     keys::check_chunk("run id", &config.run_id).map_err(lhm_cluster::ClusterError::from)?;
-    if config.amp.is_some() && demo.is_none() {
+    if config.amp_enabled && demo.is_none() {
         return Err(ServiceError::Config(
             "AMP is on but no demo motion was given (install clips with scripts/install-motions, \
              or train without AMP)"
@@ -733,4 +735,39 @@ fn unix_ms() -> u64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_millis() as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<TrainConfig, ServiceError> {
+        let path = std::env::temp_dir().join(format!(
+            "lhm-train-config-{}-{}.toml",
+            std::process::id(),
+            text.len()
+        ));
+        std::fs::write(&path, text).unwrap();
+        let out = TrainConfig::from_toml_file(&path);
+        let _ = std::fs::remove_file(&path);
+        out
+    }
+
+    #[test]
+    fn toml_overrides_defaults_and_errors_name_the_field() {
+        let c = parse("run_id = \"x\"\namp_enabled = false\n[ppo]\nepochs = 2\n").unwrap();
+        assert_eq!(c.run_id, "x");
+        assert_eq!(c.ppo.epochs, 2);
+        assert_eq!(c.batch_steps, TrainConfig::default().batch_steps);
+        assert!(c.learner_config().amp.is_none());
+        assert_eq!(c.run_spec().amp_dim, 0);
+
+        let err = parse("[ppo]\nepochs = \"six\"\n").unwrap_err().to_string();
+        assert!(err.contains("ppo.epochs"), "{err}");
+        let err = parse("bach_steps = 10\n").unwrap_err().to_string();
+        assert!(err.contains("bach_steps"), "{err}");
+        let err = parse("run_id = \n").unwrap_err().to_string();
+        assert!(err.contains("lhm-train-config"), "{err}");
+        assert!(parse("role = \"critic\"\n").unwrap().role().is_err());
+    }
 }
