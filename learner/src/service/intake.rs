@@ -30,7 +30,7 @@ impl IntakeCounters {
 #[derive(Debug, PartialEq)]
 pub enum Intake {
     Accepted(Box<TrajectoryChunk>),
-    Stale { version: u64 },
+    Stale { version: u64, actor_id: String },
     Rejected(String),
 }
 
@@ -80,6 +80,7 @@ pub fn admit(
         counters.stale += 1;
         return Intake::Stale {
             version: chunk.policy_version,
+            actor_id: chunk.actor_id,
         };
     }
     counters.accepted += 1;

@@ -210,7 +210,11 @@ pub struct LearnerStatus {
     /// Transitions that went into updates (equals the accepted chunks' steps consumed).
     pub steps_used: u64,
     pub intake: IntakeCounters,
+    /// Live processes that have sent trajectories (actors).
     pub actors_alive: Vec<String>,
+    /// Every live process of the run (actors, dagger-server, …), by liveliness token.
+    pub processes_alive: Vec<String>,
+    /// Distinct actors that have sent trajectories since this learner started.
     pub actors_seen: usize,
     pub resumed_from_iteration: Option<u64>,
     pub last: Option<IterationReport>,
@@ -488,7 +492,8 @@ pub fn run_learner(
         samples: learner.counters.samples,
         steps_used,
         intake: counters.clone(),
-        actors_alive: alive.iter().cloned().collect(),
+        actors_alive: alive.intersection(seen).cloned().collect(),
+        processes_alive: alive.iter().cloned().collect(),
         actors_seen: seen.len(),
         resumed_from_iteration: resumed,
         last: last.clone(),
@@ -529,7 +534,6 @@ pub fn run_learner(
                     if alive.insert(process.to_owned()) {
                         tracing::info!("{process} joined ({} alive)", alive.len());
                     }
-                    seen.insert(process.to_owned());
                     // A (re)joining actor may have missed the last broadcast (e.g. it outlived a
                     // learner restart and holds a newer version than the checkpoint): send again.
                     republish = true;
@@ -580,10 +584,14 @@ pub fn run_learner(
             &mut counters,
         ) {
             Intake::Accepted(chunk) => {
+                if !seen.contains(&chunk.actor_id) {
+                    seen.insert(chunk.actor_id.clone());
+                }
                 pending_steps += chunk.num_steps as usize;
                 pending.push(*chunk);
             }
-            Intake::Stale { version } => {
+            Intake::Stale { version, actor_id } => {
+                seen.insert(actor_id);
                 tracing::debug!("dropped a chunk of policy version {version}");
                 if version > learner.counters.iteration {
                     // Made by weights this learner never published (it restarted from an older
@@ -647,7 +655,7 @@ pub fn run_learner(
             mean_return: s.mean_return,
             success_rate: s.success_rate,
             episodes: s.episodes,
-            actors_alive: alive.len(),
+            actors_alive: alive.intersection(&seen).count(),
             update_s,
         };
         let mut m = Metrics {
@@ -676,7 +684,10 @@ pub fn run_learner(
         v.insert("intake/accepted".into(), counters.accepted as f64);
         v.insert("intake/stale".into(), counters.stale as f64);
         v.insert("intake/rejected".into(), counters.rejected() as f64);
-        v.insert("actors_alive".into(), alive.len() as f64);
+        v.insert(
+            "actors_alive".into(),
+            alive.intersection(&seen).count() as f64,
+        );
         recording.with("metrics", |r| r.write_metrics(&m));
         if let Ok(bytes) = m.encode_checked() {
             let _ = session
