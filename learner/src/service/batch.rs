@@ -10,7 +10,7 @@ use crate::gae::{compute_gae, GaeInput, GaeParams};
 use crate::ppo::PpoBatch;
 
 /// Episode outcomes seen in a batch.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct EpisodeSummary {
     pub episodes: u64,
     pub mean_return: f64,

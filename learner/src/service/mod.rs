@@ -218,30 +218,47 @@ pub struct LearnerStatus {
     pub actors_seen: usize,
     pub resumed_from_iteration: Option<u64>,
     pub last: Option<IterationReport>,
-    pub episodes: Option<EpisodeSummaryJson>,
+    pub episodes: Option<EpisodeSummary>,
 }
 
-#[derive(Debug, Clone, Serialize)]
-pub struct EpisodeSummaryJson {
-    pub episodes: u64,
-    pub mean_return: f64,
-    pub mean_length: f64,
-    pub success_rate: f64,
-    pub falls: u64,
-    pub mean_task_reward: f64,
-    pub mean_style_reward: f64,
+/// What the learner knows about the run besides its networks: the intake, who is alive, what the
+/// last batch held. `status.json` is written from it.
+#[derive(Default)]
+struct Book {
+    counters: IntakeCounters,
+    /// Live processes, by liveliness token.
+    alive: BTreeSet<String>,
+    /// Processes that have sent trajectories (actors).
+    seen: BTreeSet<String>,
+    steps_used: u64,
+    last: Option<IterationReport>,
+    episodes: Option<EpisodeSummary>,
 }
 
-impl From<&EpisodeSummary> for EpisodeSummaryJson {
-    fn from(s: &EpisodeSummary) -> Self {
-        Self {
-            episodes: s.episodes,
-            mean_return: s.mean_return,
-            mean_length: s.mean_length,
-            success_rate: s.success_rate,
-            falls: s.falls,
-            mean_task_reward: s.mean_task_reward,
-            mean_style_reward: s.mean_style_reward,
+impl Book {
+    fn actors_alive(&self) -> Vec<String> {
+        self.alive.intersection(&self.seen).cloned().collect()
+    }
+
+    fn status(
+        &self,
+        config: &TrainConfig,
+        learner: &Learner,
+        resumed: Option<u64>,
+    ) -> LearnerStatus {
+        LearnerStatus {
+            run_id: config.run_id.clone(),
+            iteration: learner.counters.iteration,
+            policy_version: learner.counters.iteration,
+            samples: learner.counters.samples,
+            steps_used: self.steps_used,
+            intake: self.counters.clone(),
+            actors_alive: self.actors_alive(),
+            processes_alive: self.alive.iter().cloned().collect(),
+            actors_seen: self.seen.len(),
+            resumed_from_iteration: resumed,
+            last: self.last.clone(),
+            episodes: self.episodes.clone(),
         }
     }
 }
@@ -467,51 +484,15 @@ pub fn run_learner(
         f();
     }
 
-    let mut counters = IntakeCounters::default();
-    let mut alive: BTreeSet<String> = BTreeSet::new();
-    let mut seen: BTreeSet<String> = BTreeSet::new();
+    let mut book = Book::default();
     let mut pending: Vec<TrajectoryChunk> = Vec::new();
     let mut pending_steps = 0usize;
-    let mut steps_used = 0u64;
-    let mut last_report: Option<IterationReport> = None;
-    let mut last_episodes: Option<EpisodeSummaryJson> = None;
     let mut iteration_started = Instant::now();
     let mut republish = false;
     let mut last_status = Instant::now();
     let mut last_republish = Instant::now();
-    let status = |learner: &Learner,
-                  counters: &IntakeCounters,
-                  alive: &BTreeSet<String>,
-                  seen: &BTreeSet<String>,
-                  steps_used: u64,
-                  last: &Option<IterationReport>,
-                  episodes: &Option<EpisodeSummaryJson>| LearnerStatus {
-        run_id: config.run_id.clone(),
-        iteration: learner.counters.iteration,
-        policy_version: learner.counters.iteration,
-        samples: learner.counters.samples,
-        steps_used,
-        intake: counters.clone(),
-        actors_alive: alive.intersection(seen).cloned().collect(),
-        processes_alive: alive.iter().cloned().collect(),
-        actors_seen: seen.len(),
-        resumed_from_iteration: resumed,
-        last: last.clone(),
-        episodes: episodes.clone(),
-    };
     let status_path = run_dir.join("status.json");
-    write_json_atomic(
-        &status_path,
-        &status(
-            &learner,
-            &counters,
-            &alive,
-            &seen,
-            steps_used,
-            &last_report,
-            &last_episodes,
-        ),
-    )?;
+    write_json_atomic(&status_path, &book.status(config, &learner, resumed))?;
 
     loop {
         if shutdown::requested()
@@ -531,16 +512,16 @@ pub fn run_learner(
             }
             match sample.kind() {
                 SampleKind::Put => {
-                    if alive.insert(process.to_owned()) {
-                        tracing::info!("{process} joined ({} alive)", alive.len());
+                    if book.alive.insert(process.to_owned()) {
+                        tracing::info!("{process} joined ({} alive)", book.alive.len());
                     }
                     // A (re)joining actor may have missed the last broadcast (e.g. it outlived a
                     // learner restart and holds a newer version than the checkpoint): send again.
                     republish = true;
                 }
                 SampleKind::Delete => {
-                    if alive.remove(process) {
-                        tracing::info!("{process} left ({} alive)", alive.len());
+                    if book.alive.remove(process) {
+                        tracing::info!("{process} left ({} alive)", book.alive.len());
                     }
                 }
             }
@@ -556,18 +537,7 @@ pub fn run_learner(
         }
         if last_status.elapsed() >= Duration::from_secs(1) {
             // Between iterations too, so intake counters and who is alive are visible.
-            write_json_atomic(
-                &status_path,
-                &status(
-                    &learner,
-                    &counters,
-                    &alive,
-                    &seen,
-                    steps_used,
-                    &last_report,
-                    &last_episodes,
-                ),
-            )?;
+            write_json_atomic(&status_path, &book.status(config, &learner, resumed))?;
             last_status = Instant::now();
         }
         let Ok(Some(sample)) = traj_sub.recv_timeout(Duration::from_millis(100)) else {
@@ -581,17 +551,17 @@ pub fn run_learner(
             &spec,
             learner.counters.iteration,
             config.max_policy_lag,
-            &mut counters,
+            &mut book.counters,
         ) {
             Intake::Accepted(chunk) => {
-                if !seen.contains(&chunk.actor_id) {
-                    seen.insert(chunk.actor_id.clone());
+                if !book.seen.contains(&chunk.actor_id) {
+                    book.seen.insert(chunk.actor_id.clone());
                 }
                 pending_steps += chunk.num_steps as usize;
                 pending.push(*chunk);
             }
             Intake::Stale { version, actor_id } => {
-                seen.insert(actor_id);
+                book.seen.insert(actor_id);
                 tracing::debug!("dropped a chunk of policy version {version}");
                 if version > learner.counters.iteration {
                     // Made by weights this learner never published (it restarted from an older
@@ -635,7 +605,7 @@ pub fn run_learner(
         };
         learner.counters.iteration += 1;
         learner.counters.samples += n_steps as u64;
-        steps_used += n_steps as u64;
+        book.steps_used += n_steps as u64;
         let bytes = encode(&learner)?;
         if let Ok(mut l) = latest.lock() {
             *l = bytes.clone();
@@ -655,7 +625,7 @@ pub fn run_learner(
             mean_return: s.mean_return,
             success_rate: s.success_rate,
             episodes: s.episodes,
-            actors_alive: alive.intersection(&seen).count(),
+            actors_alive: book.actors_alive().len(),
             update_s,
         };
         let mut m = Metrics {
@@ -681,13 +651,10 @@ pub fn run_learner(
         if let Some(a) = &amp_stats {
             v.insert("amp/accuracy".into(), a.accuracy());
         }
-        v.insert("intake/accepted".into(), counters.accepted as f64);
-        v.insert("intake/stale".into(), counters.stale as f64);
-        v.insert("intake/rejected".into(), counters.rejected() as f64);
-        v.insert(
-            "actors_alive".into(),
-            alive.intersection(&seen).count() as f64,
-        );
+        v.insert("intake/accepted".into(), book.counters.accepted as f64);
+        v.insert("intake/stale".into(), book.counters.stale as f64);
+        v.insert("intake/rejected".into(), book.counters.rejected() as f64);
+        v.insert("actors_alive".into(), book.actors_alive().len() as f64);
         recording.with("metrics", |r| r.write_metrics(&m));
         if let Ok(bytes) = m.encode_checked() {
             let _ = session
@@ -699,20 +666,9 @@ pub fn run_learner(
         if let Some(f) = hooks.on_iteration.as_mut() {
             f(&report);
         }
-        last_episodes = Some(EpisodeSummaryJson::from(s));
-        last_report = Some(report);
-        write_json_atomic(
-            &status_path,
-            &status(
-                &learner,
-                &counters,
-                &alive,
-                &seen,
-                steps_used,
-                &last_report,
-                &last_episodes,
-            ),
-        )?;
+        book.episodes = Some(s.clone());
+        book.last = Some(report);
+        write_json_atomic(&status_path, &book.status(config, &learner, resumed))?;
         iteration_started = Instant::now();
     }
     learner.save(&stem)?;
@@ -721,15 +677,7 @@ pub fn run_learner(
         learner.counters.iteration,
         stem.display()
     );
-    let final_status = status(
-        &learner,
-        &counters,
-        &alive,
-        &seen,
-        steps_used,
-        &last_report,
-        &last_episodes,
-    );
+    let final_status = book.status(config, &learner, resumed);
     write_json_atomic(&status_path, &final_status)?;
     recording.finish();
     let _ = session.close().wait();
