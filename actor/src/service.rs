@@ -220,7 +220,7 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
             let mut m = Metrics {
                 run_id: config.run_id.clone(),
                 process: config.actor_id.clone(),
-                unix_time_ms: unix_ms(),
+                unix_time_ms: lhm_cluster::clock::unix_ms(),
                 iteration: policy.version,
                 ..Metrics::versioned()
             };
@@ -254,10 +254,4 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
         summary.env_steps
     );
     Ok(summary)
-}
-
-pub fn unix_ms() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
 }

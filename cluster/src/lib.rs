@@ -2,6 +2,7 @@
 //! endpoints (no multicast scouting), the policy weights message and the run spec inside it (so
 //! actors need nothing but an endpoint, a run id and a role), and SIGINT/SIGTERM handling.
 
+pub mod clock;
 pub mod error;
 pub mod session;
 pub mod shutdown;

@@ -349,7 +349,7 @@ impl RunRecording {
             return;
         };
         let scene = EpisodeScene::new(&self.model, &task.1, &bench.catalogue);
-        let now = unix_ns();
+        let now = lhm_cluster::clock::unix_ns();
         self.with("an episode", |r| {
             r.write_wire("/lhm/episode", now, &frames)?;
             r.write_episode(&frames, &scene, now)
@@ -589,7 +589,7 @@ pub fn run_learner(
         if let Some(first) = chunks.first() {
             // One raw chunk per iteration: enough to inspect what actors send, small enough to keep.
             recording.with("a trajectory chunk", |r| {
-                r.write_wire("/lhm/trajectory", unix_ns(), first)
+                r.write_wire("/lhm/trajectory", lhm_cluster::clock::unix_ns(), first)
             });
         }
         let ppo_stats = learner
@@ -631,7 +631,7 @@ pub fn run_learner(
         let mut m = Metrics {
             run_id: config.run_id.clone(),
             process: "learner".into(),
-            unix_time_ms: unix_ms(),
+            unix_time_ms: lhm_cluster::clock::unix_ms(),
             iteration: it,
             ..Metrics::versioned()
         };
@@ -682,18 +682,6 @@ pub fn run_learner(
     recording.finish();
     let _ = session.close().wait();
     Ok(final_status)
-}
-
-fn unix_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
-
-fn unix_ms() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
 }
 
 #[cfg(test)]
