@@ -1,6 +1,9 @@
 """MuJoCo reference for `lhm bench env`: steps the same character file (sim/assets/amp_humanoid.xml)
 with the same settings -- 1/120 s physics steps, 4 per 30 Hz control step, the same action mapping
-and action stream, episodes restored every 150 control steps -- on one core, from Python.
+and action stream, episodes restored on a fall (a body other than feet and hands below 0.15 m,
+the env's rule) or after 150 control steps -- on one core, from Python. MuJoCo has no substeps:
+120 Hz physics is 4 steps of 1/120 s per control step. It reports how often MuJoCo itself reset an
+unstable state (its "bad qacc" warning), which would make its figure less comparable.
 
 Run through bench/run-mujoco (installs mujoco into bench/.venv). Prints JSON.
 """
@@ -16,6 +19,7 @@ import mujoco
 ROOT = Path(__file__).resolve().parent.parent
 XML = ROOT / "sim" / "assets" / "amp_humanoid.xml"
 EPISODE = 150
+FALL_HEIGHT = 0.15
 
 
 def action_stream(seed, n):
@@ -44,6 +48,16 @@ def action_mapping(model):
     return out
 
 
+def checked_bodies(model):
+    """Body ids the fall rule looks at: all but the world, feet and hands."""
+    out = []
+    for b in range(1, model.nbody):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or ""
+        if not (name.endswith("foot") or name.endswith("hand")):
+            out.append(b)
+    return out
+
+
 def run(steps, reps):
     model = mujoco.MjModel.from_xml_path(str(XML))
     data = mujoco.MjData(model)
@@ -51,20 +65,30 @@ def run(steps, reps):
     per_control = round((1.0 / 30.0) / model.opt.timestep)
     actions = action_stream(7, EPISODE * model.nu)
     start_qpos = data.qpos.copy()
+    checked = checked_bodies(model)
     rates = []
+    episodes = 0
+    unstable = 0
     for _ in range(reps + 1):
         mujoco.mj_resetData(model, data)
         data.qpos[:] = start_qpos
+        k = 0
         t = time.perf_counter()
         for step in range(steps):
-            k = step % EPISODE
-            if k == 0 and step > 0:
+            fell = k > 0 and min(data.xpos[b][2] for b in checked) < FALL_HEIGHT
+            if k >= EPISODE or fell:
+                unstable += data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number
                 mujoco.mj_resetData(model, data)
                 data.qpos[:] = start_qpos
+                k = 0
+                episodes += 1
             a = actions[k * model.nu:(k + 1) * model.nu]
             for i, (off, scale, lo, hi) in enumerate(mapping):
                 data.ctrl[i] = min(max(off + scale * a[i], lo), hi)
             mujoco.mj_step(model, data, nstep=per_control)
+            k += 1
+        unstable += data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number
+        episodes += 1
         rates.append(steps / (time.perf_counter() - t))
     rates = rates[1:]  # the first run is the warm-up
     return {
@@ -76,6 +100,8 @@ def run(steps, reps):
         "mass_kg": round(float(sum(model.body_mass)), 2),
         "steps_per_repetition": steps,
         "repetitions": reps,
+        "mean_episode_steps": round(steps * (reps + 1) / episodes, 1),
+        "unstable_resets": unstable,
         "control_steps_per_s_per_core": round(statistics.median(rates)),
         "physics_steps_per_s_per_core": round(statistics.median(rates) * per_control),
     }

@@ -33,7 +33,7 @@ enum BenchCommand {
         /// Another MJCF character instead of the shipped AMP humanoid.
         #[arg(long, value_name = "XML")]
         character: Option<PathBuf>,
-        /// Pipeline steps per control step (default: the training setting, 4 x 1/120 s).
+        /// Pipeline steps per control step (default: the training setting, 2 x 1/60 s with 2 substeps).
         #[arg(long)]
         pipeline_steps: Option<usize>,
     },
@@ -97,20 +97,25 @@ pub fn run(args: BenchArgs) -> Result<()> {
                 steps,
                 repetitions.max(1),
                 threads,
+                lhm_sim::env::EnvConfig::default().fall_height,
             );
             if json {
                 println!("{}", serde_json::to_string_pretty(&r)?);
             } else {
                 println!(
-                    "{}: {:.0} control steps/s ({:.0} physics steps/s) on one core; {:.0} ({:.0}) on {} threads; median of {} x {} steps",
+                    "{}: {:.0} control steps/s ({:.0} physics steps/s) on one core; {:.0} ({:.0}) with {} worlds on {} threads; median of {} x {} steps; episodes end on a fall or after {} steps (mean {:.1}); {:.0} control steps/s on one core when only the length ends them",
                     r.task,
                     r.control_steps_per_s_per_core,
                     r.physics_steps_per_s_per_core,
                     r.control_steps_per_s_all_cores,
                     r.physics_steps_per_s_all_cores,
+                    r.worlds_all_cores,
                     r.threads_all_cores,
                     r.repetitions,
-                    r.steps_per_repetition
+                    r.steps_per_repetition,
+                    r.episode_steps,
+                    r.mean_episode_steps,
+                    r.control_steps_per_s_per_core_without_fall_reset,
                 );
             }
             Ok(())

@@ -9,7 +9,7 @@ use crate::obs::{
 };
 use crate::task::cycles::{CycleTracker, Handoff, SwitchParams};
 use crate::task::rewards::{self, ReleaseRetreat, RewardWeights};
-use crate::task::terminations::{fallen, placement_error};
+use crate::task::terminations::{fall_exempt, fallen, placement_error};
 use crate::world::{SimConfig, Snapshot, World};
 use lhm_scenes::geometry::Rect;
 use lhm_scenes::routes::obstacle_rect;
@@ -117,11 +117,7 @@ impl TaskEnv {
         config: EnvConfig,
     ) -> Self {
         let world = World::with_task(model, sim, task, catalogue);
-        let exempt = model
-            .bodies
-            .iter()
-            .map(|b| b.name.ends_with("foot") || b.name.ends_with("hand"))
-            .collect();
+        let exempt = fall_exempt(model);
         let hands = [
             model.body_index("left_hand").unwrap_or(0),
             model.body_index("right_hand").unwrap_or(0),

@@ -18,6 +18,10 @@ pub struct SimConfig {
     /// (fewer, larger pipeline steps are cheaper: the multibody mass matrix is factorised once
     /// per pipeline step).
     pub pipeline_steps_per_control: usize,
+    /// Contacts closer than this (metres) are handed to the solver before they touch
+    /// (rapier's `normalized_prediction_distance`), so that limbs moving fast between two
+    /// pipeline steps do not sink into the floor first.
+    pub prediction_distance: f32,
     /// Height of the root at spawn, metres.
     pub spawn_height: f32,
     /// Contacts between the character's own links (parent-child pairs never collide).
@@ -29,13 +33,17 @@ pub struct SimConfig {
 
 impl Default for SimConfig {
     fn default() -> Self {
-        // 4 pipeline steps of 1/120 s, one solver iteration each: stable through falls and
-        // contacts. One 1/30 s step with 4 substeps is cheaper but blew up when the character hit
-        // the floor (measured: NaN at the first fall), so it is not the default.
+        // 120 Hz physics as 2 pipeline steps of 1/60 s with 2 substeps each (Isaac Gym's AMP
+        // setting). Chosen by measurement (BENCHMARKS.md, "Choosing the step"): against a
+        // 480 Hz reference it matches 4 pipeline steps of 1/120 s in the zero-action fall and in
+        // the speed statistics of random-action episodes, at ~15 % more control steps/s; contacts
+        // sink ~1 cm deeper at the 1st percentile. One 1/30 s step with 4 substeps is cheaper
+        // still but produced 41 m/s bodies and 17 cm penetrations, and once NaN at a fall.
         Self {
             control_hz: 30.0,
             physics_hz: 120.0,
-            pipeline_steps_per_control: 4,
+            pipeline_steps_per_control: 2,
+            prediction_distance: 0.02,
             spawn_height: 0.89,
             self_collisions: true,
             pin_root: false,
@@ -172,6 +180,7 @@ impl World {
         let params = IntegrationParameters {
             dt: 1.0 / (config.control_hz * steps as f32),
             num_solver_iterations: (config.physics_steps_per_control() / steps).max(1),
+            normalized_prediction_distance: config.prediction_distance,
             ..IntegrationParameters::default()
         };
         Self {

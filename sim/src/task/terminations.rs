@@ -14,6 +14,15 @@ pub fn fallen(body_heights: &[f32], exempt: &[bool], min_height: f32) -> bool {
         .any(|(h, skip)| !skip && *h < min_height)
 }
 
+/// The bodies [`fallen`] ignores: feet, and hands (which touch the floor when picking up).
+pub fn fall_exempt(model: &crate::mjcf::CharacterModel) -> Vec<bool> {
+    model
+        .bodies
+        .iter()
+        .map(|b| b.name.ends_with("foot") || b.name.ends_with("hand"))
+        .collect()
+}
+
 /// Dist: the final placement error in metres.
 pub fn placement_error(object_pos: Vector, goal: Vector) -> f32 {
     (object_pos - goal).length()
