@@ -635,6 +635,45 @@ pub(crate) mod tests {
         assert!(up.z > 0.97, "{up:?}");
     }
 
+    #[test]
+    fn joint_rotations_alone_carry_the_rest_pose_correction() {
+        // Before reaching: SMPL's T-pose is our arms out to the sides, and its elbow flexion is
+        // our elbow hinge.
+        let rest = rest_offsets();
+        let down = |elbow: usize, wrist: usize| {
+            Rotation::from_rotation_arc((rest[elbow] + rest[wrist]).normalize(), -Vector::Z)
+        };
+        let frames = vec![
+            Frame::standing(Vector::new(0.0, 0.0, 0.95)),
+            Frame::standing(Vector::new(0.0, 0.0, 0.95))
+                .with(smplh::L_SHOULDER, down(smplh::L_ELBOW, smplh::L_WRIST))
+                .with(smplh::L_ELBOW, Rotation::from_rotation_z(-1.2)),
+        ];
+        let m = CharacterModel::amp_humanoid();
+        let c = clip(&frames);
+        let links = links_of(&m, &frames);
+        let t_pose = forward_kinematics(&m, &frame_pose(&m, &links, &c, 0, 1.0));
+        for (upper, hand, sign) in [
+            ("left_upper_arm", "left_hand", 1.0),
+            ("right_upper_arm", "right_hand", -1.0),
+        ] {
+            let d = direction(&t_pose, index(&m, upper), index(&m, hand));
+            assert!(d.y * sign > 0.99, "{upper}: {d:?}");
+        }
+        let bent = frame_pose(&m, &links, &c, 1, 1.0);
+        let world = forward_kinematics(&m, &bent);
+        let upper = direction(
+            &world,
+            index(&m, "left_upper_arm"),
+            index(&m, "left_lower_arm"),
+        );
+        assert!(upper.z < -0.99, "the upper arm hangs: {upper:?}");
+        let elbow = hinge_angle(&m, &bent, "left_lower_arm");
+        assert!((elbow + 1.2).abs() < 0.03, "elbow {elbow}");
+        let fore = direction(&world, index(&m, "left_lower_arm"), index(&m, "left_hand"));
+        assert!(fore.x > 0.9, "the forearm points forward: {fore:?}");
+    }
+
     /// The subject's palm: our hand's goal.
     fn palm(frames: &[Frame], t: usize, wrist: usize, knuckle: usize) -> Vector {
         0.5 * (subject(frames, t, wrist) + subject(frames, t, knuckle))
