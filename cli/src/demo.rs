@@ -21,7 +21,7 @@ impl DemoSource for ClipFeatures {
     }
 }
 
-/// Loads every installed DeepMimic clip, windowed like the environment's AMP history.
+/// Loads every installed clip (DeepMimic and OMOMO), windowed like the environment's AMP history.
 pub fn load(dir: Option<PathBuf>, config: &TrainConfig) -> Result<Box<dyn DemoSource>> {
     let dir = dir.unwrap_or_else(lhm_sim::motion::default_dir);
     let model = CharacterModel::amp_humanoid();

@@ -23,6 +23,9 @@ pub struct Room {
     pub obstacles: Vec<RigidBodyHandle>,
     /// In task order (`task.objects`).
     pub objects: Vec<RigidBodyHandle>,
+    /// Shapes only to be looked at (e.g. the box of a motion clip played back): kinematic, they
+    /// collide with nothing and are moved by hand ([`crate::World::add_prop_box`]).
+    pub props: Vec<RigidBodyHandle>,
 }
 
 /// The collision solid of an obstacle or object, in its body's frame (centred on the body).

@@ -330,3 +330,33 @@ impl World {
         }
     }
 }
+
+impl World {
+    /// Adds a box of half extents `half` that is only drawn, never simulated against: a
+    /// kinematic body whose collider interacts with nothing (so stepping ignores it), listed in
+    /// [`Room::props`] so the renderer paints it as an object. Move it with [`Self::set_prop_pose`].
+    pub fn add_prop_box(&mut self, half: Vector, pose: Pose) -> RigidBodyHandle {
+        let h = self.state.bodies.insert(
+            RigidBodyBuilder::kinematic_position_based()
+                .pose(pose)
+                .build(),
+        );
+        self.state.colliders.insert_with_parent(
+            ColliderBuilder::cuboid(half.x, half.y, half.z)
+                .collision_groups(InteractionGroups::none())
+                .solver_groups(InteractionGroups::none())
+                .build(),
+            h,
+            &mut self.state.bodies,
+        );
+        self.room.props.push(h);
+        h
+    }
+
+    /// Places a prop (see [`Self::add_prop_box`]); a handle that is not a body is ignored.
+    pub fn set_prop_pose(&mut self, prop: RigidBodyHandle, pose: Pose) {
+        if let Some(b) = self.state.bodies.get_mut(prop) {
+            b.set_position(pose, false);
+        }
+    }
+}

@@ -9,14 +9,15 @@
 
 use super::deepmimic::DeepMimicClip;
 use super::library::{self, Source};
-use super::retarget::{deepmimic_poses, forward_kinematics, KinematicPose};
+use super::omomo::{self, OmomoClip};
+use super::retarget::{deepmimic_poses, forward_kinematics, omomo_poses, KinematicPose};
 use super::MotionError;
 use crate::env::EnvConfig;
 use crate::mjcf::{BodyDef, CharacterModel};
 use crate::obs::{amp_frame, amp_frame_dim, BodyState};
 use crate::world::SimConfig;
 use rapier3d::math::{Rotation, Vector};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The stretch of motion one discriminator input covers: `frames` AMP frames `control_dt` apart.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -158,17 +159,18 @@ impl DemoMotion {
         })
     }
 
-    /// Every DeepMimic clip installed under `dir` (`dir/deepmimic/`, as [`library::list`] finds
-    /// them), retargeted onto `model`. OMOMO clips are skipped: retargeting SMPL-H onto the
-    /// character does not exist yet. A missing install is [`MotionError::NotInstalled`], which
-    /// tells the user to run `scripts/install-motions`.
+    /// Every clip installed under `dir` (`dir/deepmimic/` and `dir/omomo/`, as [`library::list`]
+    /// finds them), retargeted onto `model`: DeepMimic joint for joint, OMOMO's SMPL-H through
+    /// [`omomo_poses`]. A source folder that is missing is skipped; no clips at all is
+    /// [`MotionError::NoClips`], and a missing install [`MotionError::NotInstalled`], which tells
+    /// the user to run `scripts/install-motions`.
     pub fn load_dir(
         model: &CharacterModel,
         dir: &Path,
         window: AmpWindow,
     ) -> Result<Self, MotionError> {
         let mut clips = Vec::new();
-        for (name, path) in library::clip_files(dir, Source::DeepMimic)? {
+        for (name, path) in installed(dir, Source::DeepMimic)? {
             let file = path.display().to_string();
             let text = std::fs::read_to_string(&path).map_err(|source| MotionError::Io {
                 file: file.clone(),
@@ -178,9 +180,18 @@ impl DemoMotion {
             let frame_dt = uniform_frame_dt(&clip, &file)?;
             clips.push((name, deepmimic_poses(model, &clip), frame_dt));
         }
+        for (name, path) in installed(dir, Source::Omomo)? {
+            let file = path.display().to_string();
+            let bytes = std::fs::read(&path).map_err(|source| MotionError::Io {
+                file: file.clone(),
+                source,
+            })?;
+            let clip = OmomoClip::parse(&bytes, &file)?;
+            clips.push((name, omomo_poses(model, &clip, &file)?, 1.0 / omomo::FPS));
+        }
         if clips.is_empty() {
             return Err(MotionError::NoClips {
-                path: dir.join("deepmimic").display().to_string(),
+                path: dir.display().to_string(),
             });
         }
         Self::from_clips(model, clips, window)
@@ -295,6 +306,17 @@ fn centre_of_mass(body: &BodyDef) -> Vector {
         sum / mass as f32
     } else {
         Vector::ZERO
+    }
+}
+
+/// The clip files of one source, none if its folder is missing (an install of the other
+/// source only); a missing install is still [`MotionError::NotInstalled`].
+fn installed(dir: &Path, source: Source) -> Result<Vec<(String, PathBuf)>, MotionError> {
+    match library::clip_files(dir, source) {
+        Err(MotionError::Io { source: e, .. }) if e.kind() == std::io::ErrorKind::NotFound => {
+            Ok(Vec::new())
+        }
+        other => other,
     }
 }
 
@@ -631,5 +653,48 @@ mod tests {
             "{:?}",
             &row[..10]
         );
+    }
+
+    #[test]
+    fn load_dir_reads_omomo_clips_through_the_smplh_retargeting() {
+        use crate::motion::omomo_retarget::tests::{clip_file, Frame};
+        use crate::motion::smplh;
+        // A subject gliding along its own +x at 0.9 m/s with the left knee bent 1 rad, turned
+        // to face world +y: in the heading frame the root moves forward.
+        let facing = Rotation::from_rotation_z(std::f32::consts::FRAC_PI_2);
+        let frames: Vec<Frame> = (0..20)
+            .map(|k| {
+                Frame::standing(Vector::new(0.0, 0.9 * k as f32 * DT, 0.95))
+                    .with(smplh::PELVIS, facing)
+                    .with(smplh::L_KNEE, Rotation::from_rotation_y(1.0))
+            })
+            .collect();
+        let dir = std::env::temp_dir().join(format!("lhm-demo-omomo-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("omomo")).expect("dir");
+        std::fs::write(dir.join("MANIFEST"), "").expect("manifest");
+        std::fs::write(dir.join("omomo/glide.pt"), clip_file(&frames)).expect("write");
+        let m = CharacterModel::amp_humanoid();
+        let demo = DemoMotion::load_dir(&m, &dir, AmpWindow::default());
+        std::fs::remove_dir_all(&dir).ok();
+        let demo = demo.expect("loads without a deepmimic folder");
+        let names: Vec<_> = demo.clips().collect();
+        assert_eq!(names.len(), 1);
+        assert_eq!(names[0].0, "glide");
+        assert!((names[0].1 - 19.0 * DT).abs() < 1e-5);
+        let row = demo.sample_features(1, &mut replay(vec![0.5]));
+        assert_eq!(row.len(), demo.feature_dim());
+        let (rot, _) = joint_offsets(&m);
+        let shin = m.body_index("left_shin").expect("shin");
+        let knee = rot[shin].expect("in the layout");
+        for f in row.chunks(amp_frame_dim(&m)) {
+            assert!(
+                (f[7] - 0.9).abs() < 1e-3 && f[8].abs() < 1e-3,
+                "{:?}",
+                &f[7..10]
+            );
+            // The subject's rest knee is bent a little already: about 1 rad in all.
+            assert!((f[knee] - 1.0).abs() < 0.2, "knee {}", f[knee]);
+            assert!((0.7..0.9).contains(&f[0]), "root height {}", f[0]);
+        }
     }
 }

@@ -4,9 +4,13 @@
 
 pub mod deepmimic;
 pub mod demo;
+pub mod joints;
 pub mod library;
 pub mod omomo;
+pub mod omomo_retarget;
+pub mod reach;
 pub mod retarget;
+pub mod smplh;
 
 pub use demo::{AmpWindow, DemoMotion};
 

@@ -1,7 +1,9 @@
 //! OMOMO clips as shipped by holosoma-retargeting: a PyTorch `.pt` file, which is a zip archive
 //! whose `*/data/0` entry is the raw little-endian f32 tensor, T frames × 591 values, 30 fps, Z up:
 //! [0:3] root position, [3:7] root quaternion (x, y, z, w), [162:318] 52 × 3 world joint positions,
-//! [318:325] box pose, [383:591] 52 × 4 world body quaternions of the SMPL-H skeleton.
+//! [318:325] box pose, [383:591] 52 × 4 world body quaternions of the SMPL-H skeleton. The 52
+//! bodies come in depth-first tree order, not SMPL-H's own joint order, and the quaternions are
+//! x, y, z, w like the root's: see [`super::smplh`].
 //!
 //! torch stores these entries uncompressed, so a small reader of the zip's central directory
 //! suffices; a compressed or truncated entry is an error, never a guess.
@@ -37,19 +39,22 @@ impl OmomoClip {
         [f[3], f[4], f[5], f[6]]
     }
 
-    /// World position of SMPL-H joint `j` (0..52).
+    /// World position of SMPL-H joint `j` (0..52, in [`super::smplh`]'s order).
     pub fn joint_pos(&self, t: usize, j: usize) -> [f32; 3] {
         let f = &self.frame(t)[162 + 3 * j..];
         [f[0], f[1], f[2]]
     }
 
-    /// The box's pose: position (3) and quaternion (4).
+    /// The box's pose: position (3) and quaternion (4, x, y, z, w: with it the hands keep fixed
+    /// coordinates in the box's frame while carrying). The position is the OMOMO mesh's origin,
+    /// a few centimetres off the box's centre.
     pub fn box_pose(&self, t: usize) -> [f32; 7] {
         let f = &self.frame(t)[318..325];
         [f[0], f[1], f[2], f[3], f[4], f[5], f[6]]
     }
 
-    /// World rotation of SMPL-H body `j` (0..52), as stored.
+    /// World rotation of SMPL-H body `j` (0..52), as stored: x, y, z, w (body 0's equals
+    /// [`Self::root_quat`] in the installed clips).
     pub fn body_quat(&self, t: usize, j: usize) -> [f32; 4] {
         let f = &self.frame(t)[383 + 4 * j..];
         [f[0], f[1], f[2], f[3]]

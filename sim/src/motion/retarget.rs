@@ -4,8 +4,12 @@
 //! DeepMimic's humanoid matches ours joint for joint, but is Y up: a rotation of +90° about x
 //! takes its frame to ours (x stays, y → z, z → -y), and every rotation, world or local, is
 //! conjugated by it (both humanoids' body frames are aligned at rest).
+//!
+//! OMOMO's SMPL-H clips need a real retargeting (another skeleton, another rest pose): see
+//! [`super::omomo_retarget`], re-exported here as [`omomo_poses`].
 
 use super::deepmimic::{DeepMimicClip, DeepMimicFrame, JOINTS};
+pub use super::omomo_retarget::omomo_poses;
 use crate::mjcf::CharacterModel;
 use rapier3d::math::{Rotation, Vector};
 
