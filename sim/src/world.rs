@@ -254,12 +254,38 @@ impl World {
             })
     }
 
+    /// World pose of model body `body` (a welded body's, from the rigid body carrying it).
     pub fn body_pose(&self, body: usize) -> Pose {
-        *self.state.bodies[self.character.bodies[body]].position()
+        let carrier = self.state.bodies[self.character.bodies[body]].position();
+        let offset = self.character.offsets[body];
+        Pose::from_parts(
+            carrier.translation + carrier.rotation * offset,
+            carrier.rotation,
+        )
     }
 
+    /// Linear velocity of model body `body`'s frame origin.
     pub fn body_linvel(&self, body: usize) -> Vector {
-        self.state.bodies[self.character.bodies[body]].linvel()
+        self.body_state(body).linvel
+    }
+
+    /// Pose and velocities of model body `body`'s frame.
+    pub fn body_state(&self, body: usize) -> crate::obs::BodyState {
+        let b = &self.state.bodies[self.character.bodies[body]];
+        let pose = self.body_pose(body);
+        // A rigid body's own velocity is its centre of mass's; a welded body's is taken at its
+        // origin (for the hands, a sphere about the origin, the same point as before merging).
+        let linvel = if self.character.offsets[body] == Vector::ZERO {
+            b.linvel()
+        } else {
+            b.velocity_at_point(pose.translation)
+        };
+        crate::obs::BodyState {
+            pos: pose.translation,
+            rot: pose.rotation,
+            linvel,
+            angvel: b.angvel(),
+        }
     }
 
     pub fn root_height(&self) -> f32 {
@@ -302,18 +328,8 @@ impl World {
 impl World {
     /// Every character body's state, in model order.
     pub fn body_states(&self) -> Vec<crate::obs::BodyState> {
-        self.character
-            .bodies
-            .iter()
-            .map(|h| {
-                let b = &self.state.bodies[*h];
-                crate::obs::BodyState {
-                    pos: b.position().translation,
-                    rot: b.position().rotation,
-                    linvel: b.linvel(),
-                    angvel: b.angvel(),
-                }
-            })
+        (0..self.character.bodies.len())
+            .map(|i| self.body_state(i))
             .collect()
     }
 }
@@ -323,7 +339,11 @@ impl World {
     /// kinematic playback of reference motion. Stepping afterwards starts from an inconsistent
     /// multibody state; rebuild the world to simulate again.
     pub fn set_kinematic_pose(&mut self, poses: &[(Vector, Rotation)]) {
-        for (h, (pos, rot)) in self.character.bodies.iter().zip(poses) {
+        let carried = self.character.bodies.iter().zip(&self.character.offsets);
+        for ((h, offset), (pos, rot)) in carried.zip(poses) {
+            if *offset != Vector::ZERO {
+                continue; // welded: placed with the body that carries it
+            }
             if let Some(b) = self.state.bodies.get_mut(*h) {
                 b.set_position(Pose::from_parts(*pos, *rot), false);
             }

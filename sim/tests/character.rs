@@ -141,3 +141,44 @@ fn nan_and_explosions_trip_the_guard_instead_of_a_panic() {
         );
     }
 }
+
+#[test]
+fn welded_hands_ride_on_their_forearms_with_the_mass_kept() {
+    let model = CharacterModel::amp_humanoid();
+    let mut w = World::new(&model, SimConfig::default());
+    let index = |name: &str| model.body_index(name).expect(name);
+    let (hand, forearm) = (index("right_hand"), index("right_lower_arm"));
+    // 15 model bodies on 13 rigid bodies: each hand is part of its forearm's rigid body.
+    let mut distinct = w.character.bodies.clone();
+    distinct.sort_by_key(|h| h.into_raw_parts());
+    distinct.dedup();
+    assert_eq!((w.character.bodies.len(), distinct.len()), (15, 13));
+    assert_eq!(w.character.bodies[hand], w.character.bodies[forearm]);
+    let mass: f32 = distinct.iter().map(|h| w.state.bodies[*h].mass()).sum();
+    assert!(
+        (mass as f64 - model.total_mass()).abs() < 1e-3 * model.total_mass(),
+        "simulated mass {mass} vs model {}",
+        model.total_mass()
+    );
+    // The hand's frame stays at its fixed offset in the forearm while the arm moves, and its
+    // velocity is that of that point.
+    let offset = model_offset(&model, hand);
+    for a in actions(3, 30 * model.dofs.len()).chunks(model.dofs.len()) {
+        assert!(w.step(a));
+    }
+    let (h, f) = (w.body_state(hand), w.body_pose(forearm));
+    assert!((h.pos - (f.translation + f.rotation * offset)).length() < 1e-5);
+    assert!((h.rot.dot(f.rotation).abs() - 1.0).abs() < 1e-5);
+    let carrier = &w.state.bodies[w.character.bodies[hand]];
+    assert!((h.linvel - carrier.velocity_at_point(h.pos)).length() < 1e-4);
+    assert!(
+        (h.linvel - carrier.linvel()).length() > 1e-3,
+        "not the forearm's own velocity"
+    );
+}
+
+/// The hand's origin in its forearm's frame, from the model (frames are never rotated).
+fn model_offset(model: &CharacterModel, body: usize) -> rapier3d::math::Vector {
+    let p = model.bodies[body].pos;
+    rapier3d::math::Vector::new(p[0] as f32, p[1] as f32, p[2] as f32)
+}
