@@ -5,6 +5,7 @@
 mod activation;
 mod actor_critic;
 pub mod adam;
+mod bias_add;
 pub mod checkpoint;
 mod error;
 mod fused_elu;

@@ -77,8 +77,8 @@ impl Linear {
     }
 
     pub fn forward(&self, x: &Tensor) -> NetResult<Tensor> {
-        Ok(x.matmul(&self.weight.as_tensor().t()?)?
-            .broadcast_add(self.bias.as_tensor())?)
+        let product = x.matmul(&self.weight.as_tensor().t()?)?;
+        Ok(crate::bias_add::bias_add(&product, self.bias.as_tensor())?)
     }
 }
 
