@@ -313,6 +313,35 @@ mod tests {
         }
     }
 
+    /// Reaches `target` with `hand` from `pose`, every joint soft but the torso (given
+    /// stiffness), and checks the hand got within 1 cm.
+    fn reach_with_hand(
+        m: &CharacterModel,
+        pose: &KinematicPose,
+        hand: usize,
+        target: Vector,
+        torso: usize,
+        torso_stiffness: f32,
+    ) -> KinematicPose {
+        let mut stiffness = vec![0.0002; m.bodies.len()];
+        stiffness[torso] = torso_stiffness;
+        let reacher = Reacher {
+            model: m,
+            stiffness,
+            pitch: None,
+        };
+        let out = reacher
+            .reach(pose, &[Goal { body: hand, target }], None)
+            .pose;
+        let world = forward_kinematics(m, &out);
+        assert!(
+            (world[hand].0 - target).length() < 0.01,
+            "{:?}",
+            world[hand].0
+        );
+        out
+    }
+
     #[test]
     fn a_hand_reaches_a_point_in_front_by_moving_its_arm() {
         let m = CharacterModel::amp_humanoid();
@@ -320,22 +349,7 @@ mod tests {
         let torso = m.body_index("torso").expect("torso");
         let target = Vector::new(0.35, -0.2, 1.1);
         let pose = standing(&m);
-        let mut stiffness = vec![0.0002; m.bodies.len()];
-        stiffness[torso] = 1.0;
-        let reacher = Reacher {
-            model: &m,
-            stiffness,
-            pitch: None,
-        };
-        let out = reacher
-            .reach(&pose, &[Goal { body: hand, target }], None)
-            .pose;
-        let world = forward_kinematics(&m, &out);
-        assert!(
-            (world[hand].0 - target).length() < 0.01,
-            "{:?}",
-            world[hand].0
-        );
+        let out = reach_with_hand(&m, &pose, hand, target, torso, 1.0);
         assert!(out.local_rots[torso].angle_between(Rotation::IDENTITY) < 0.05);
         let legs = m.body_index("right_thigh").expect("thigh");
         assert_eq!(out.local_rots[legs], Rotation::IDENTITY, "legs stay");
@@ -367,22 +381,7 @@ mod tests {
             (world[shoulder].0 - target).length() > 0.6,
             "out of arm's reach"
         );
-        let mut stiffness = vec![0.0002; m.bodies.len()];
-        stiffness[torso] = 0.002;
-        let reacher = Reacher {
-            model: &m,
-            stiffness,
-            pitch: None,
-        };
-        let out = reacher
-            .reach(&pose, &[Goal { body: hand, target }], None)
-            .pose;
-        let world = forward_kinematics(&m, &out);
-        assert!(
-            (world[hand].0 - target).length() < 0.01,
-            "{:?}",
-            world[hand].0
-        );
+        let out = reach_with_hand(&m, &pose, hand, target, torso, 0.002);
         let bend = twist_angle(out.local_rots[torso], Vector::Y);
         assert!(bend > 0.6, "the torso bends further: {bend}");
     }
