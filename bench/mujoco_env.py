@@ -4,6 +4,8 @@ and action stream, episodes restored on a fall (a body other than feet and hands
 the env's rule) or after 150 control steps -- on one core, from Python. MuJoCo has no substeps:
 120 Hz physics is 4 steps of 1/120 s per control step. It reports how often MuJoCo itself reset an
 unstable state (its "bad qacc" warning), which would make its figure less comparable.
+After mj_step, data.xpos still holds the pose at the START of that step, so the fall check runs
+mj_kinematics first (cheap: forward kinematics only, once per control step, the env's own cost too).
 
 Run through bench/run-mujoco (installs mujoco into bench/.venv). Prints JSON.
 """
@@ -34,16 +36,11 @@ def action_stream(seed, n):
 
 def action_mapping(model):
     """Per actuator: (offset, scale, lo, hi), as sim/src/character.rs computes them."""
-    groups = {}
-    for j in range(model.njnt):
-        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
-            groups.setdefault(model.jnt_bodyid[j], []).append(j)
     out = []
     for a in range(model.nu):
         j = model.actuator_trnid[a, 0]
         lo, hi = model.jnt_range[j]
-        hinge = len(groups[model.jnt_bodyid[j]]) == 1
-        offset = 0.5 * (lo + hi) if hinge else min(max(0.0, lo), hi)
+        offset = min(max(0.0, lo), hi)  # zero action = the neutral pose
         out.append((offset, max(hi - offset, offset - lo), lo, hi))
     return out
 
@@ -75,6 +72,8 @@ def run(steps, reps):
         k = 0
         t = time.perf_counter()
         for step in range(steps):
+            if k > 0:
+                mujoco.mj_kinematics(model, data)  # after mj_step, xpos is from the step's start
             fell = k > 0 and min(data.xpos[b][2] for b in checked) < FALL_HEIGHT
             if k >= EPISODE or fell:
                 unstable += data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number

@@ -4,6 +4,8 @@ use lhm_learner::bench::BenchSpec;
 use lhm_nets::MlpConfig;
 use lhm_scenes::Benchmark;
 use lhm_sim::bench::run_env_bench;
+use lhm_sim::character::ServoModel;
+use lhm_sim::fidelity::{run_fidelity, FidelityReport};
 use lhm_sim::{CharacterModel, SimConfig};
 use std::path::PathBuf;
 
@@ -36,6 +38,30 @@ enum BenchCommand {
         /// Pipeline steps per control step (default: the training setting, 2 x 1/60 s with 2 substeps).
         #[arg(long)]
         pipeline_steps: Option<usize>,
+    },
+    /// Physics fidelity in rapier: passive drop, 5 s neutral-pose hold, zero action, landing and a
+    /// root-pinned knee step, each with fall step, root height and pelvis tilt at 0.5/1/2/5 s,
+    /// joint tracking error, foot slide, penetration and floor force (bench/mujoco-fidelity
+    /// prints the same for MuJoCo).
+    Fidelity {
+        /// Print the full report as JSON.
+        #[arg(long)]
+        json: bool,
+        /// Servo model: implicit-spring (the training setting) or motor-constraint.
+        #[arg(long, default_value = "implicit-spring")]
+        servo: String,
+        /// rapier PGS iterations per substep (default: the training setting).
+        #[arg(long)]
+        solver_iterations: Option<usize>,
+        /// Pipeline steps per control step (default: the training setting).
+        #[arg(long)]
+        pipeline_steps: Option<usize>,
+        /// Physics rate in Hz (default: the training setting, 120).
+        #[arg(long)]
+        physics_hz: Option<f32>,
+        /// Another MJCF character instead of the shipped AMP humanoid.
+        #[arg(long, value_name = "XML")]
+        character: Option<PathBuf>,
     },
     /// Learner update throughput: one PPO minibatch step (policy + value forward, loss, backward,
     /// Adam; 256-d observations, 28-d actions, minibatch 4096) and one AMP discriminator step,
@@ -120,6 +146,47 @@ pub fn run(args: BenchArgs) -> Result<()> {
             }
             Ok(())
         }
+        BenchCommand::Fidelity {
+            json,
+            servo,
+            solver_iterations,
+            pipeline_steps,
+            physics_hz,
+            character,
+        } => {
+            let model = match character {
+                Some(path) => CharacterModel::from_file(&path)?,
+                None => CharacterModel::amp_humanoid(),
+            };
+            let defaults = SimConfig::default();
+            let config = SimConfig {
+                servo: match servo.as_str() {
+                    "implicit-spring" => ServoModel::ImplicitSpring,
+                    "motor-constraint" => ServoModel::MotorConstraint,
+                    other => anyhow::bail!(
+                        "--servo {other:?}: expected implicit-spring or motor-constraint"
+                    ),
+                },
+                solver_iterations: solver_iterations.unwrap_or(defaults.solver_iterations),
+                pipeline_steps_per_control: pipeline_steps
+                    .unwrap_or(defaults.pipeline_steps_per_control),
+                physics_hz: physics_hz.unwrap_or(defaults.physics_hz),
+                ..defaults
+            };
+            if config.solver_iterations == 0 || config.pipeline_steps_per_control == 0 {
+                anyhow::bail!("--solver-iterations and --pipeline-steps must be at least 1");
+            }
+            if !(config.physics_hz.is_finite() && config.physics_hz >= config.control_hz) {
+                anyhow::bail!("--physics-hz must be at least the control rate (30)");
+            }
+            let r = run_fidelity(&model, &config);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                print_fidelity(&r);
+            }
+            Ok(())
+        }
         BenchCommand::Cluster {
             json,
             envs,
@@ -176,4 +243,54 @@ pub fn run(args: BenchArgs) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn print_fidelity(r: &FidelityReport) {
+    let opt = |v: Option<f32>, k: f32| v.map_or("-".to_string(), |v| format!("{:.2}", v * k));
+    println!(
+        "{:<13} {:>5} {:>26} {:>26} {:>8} {:>9} {:>8} {:>15}",
+        "scenario",
+        "fall",
+        "root height m (0.5/1/2/5s)",
+        "pelvis tilt deg",
+        "err deg",
+        "slide mm",
+        "pen mm",
+        "force N mean/sd"
+    );
+    for (name, s) in [
+        ("passive_drop", &r.passive_drop),
+        ("neutral_hold", &r.neutral_hold),
+        ("zero_action", &r.zero_action),
+        ("landing", &r.landing),
+    ] {
+        let series = |m: &std::collections::BTreeMap<String, f32>| {
+            ["0.5", "1", "2", "5"]
+                .iter()
+                .map(|k| m.get(*k).map_or("-".into(), |v| format!("{v:.2}")))
+                .collect::<Vec<String>>()
+                .join("/")
+        };
+        println!(
+            "{:<13} {:>5} {:>26} {:>26} {:>8} {:>9} {:>8.2} {:>15}",
+            name,
+            s.fall_step.map_or("-".into(), |f| f.to_string()),
+            series(&s.root_height_m),
+            series(&s.pelvis_tilt_deg),
+            opt(s.max_tracking_error_deg, 1.0),
+            opt(s.foot_slide_m, 1000.0),
+            s.max_penetration_m * 1000.0,
+            format!("{:.0}/{:.0}", s.contact_force_mean_n, s.contact_force_std_n),
+        );
+    }
+    let knee: Vec<String> = r
+        .servo_step
+        .knee_error_deg
+        .iter()
+        .map(|(t, e)| format!("{t} s: {e:.1}"))
+        .collect();
+    println!(
+        "servo_step (root pinned, right knee to 70 deg): error {}",
+        knee.join(", ")
+    );
 }

@@ -1,6 +1,6 @@
 //! The character in a rapier world: one reduced-coordinate multibody (multibody joints stayed
-//! stable under PD control where impulse joints gained energy), PD servos as force-based joint
-//! motors with torque limits, CCD off (on multibody links it pulled links off their joints).
+//! stable under PD control where impulse joints gained energy), PD servos with torque limits
+//! ([`ServoModel`]), CCD off (on multibody links it pulled links off their joints).
 //!
 //! Actions are PD targets: target = offset + scale · a per DoF, clamped to the joint's range (see
 //! `spawn` for the offsets and scales). A 3-DoF joint's target is the rotation Rx·Ry·Rz of its three targets; rapier's
@@ -10,8 +10,24 @@
 use crate::mjcf::{CharacterModel, GeomShape, JointKind};
 use rapier3d::prelude::*;
 
-/// Friction of the character's geoms (MuJoCo's default sliding friction).
-const FRICTION: f32 = 1.0;
+/// How the PD servos act on the joints.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ServoModel {
+    /// PD inside the multibody dynamics, as MuJoCo's `implicitfast` integrates a position
+    /// actuator: kp as an implicit joint spring toward the target (its rest point moved so the
+    /// spring force at the current angle is kp·error clamped to the torque limit) and kd as
+    /// implicit joint damping. The servo is solved exactly with the joint's inertia, not as a
+    /// constraint competing with contacts in a few solver iterations: with the feet on the floor
+    /// the motor constraints left the servos far softer than kp (15-24° standing errors, a
+    /// neutral pose that collapsed in 2 s; BENCHMARKS.md, "Physics fidelity"). The torque clamp
+    /// is applied at the velocity at the start of each pipeline step.
+    #[default]
+    ImplicitSpring,
+    /// rapier's force-based joint motors: velocity constraints with a force limit, solved
+    /// together with the contacts (the model before the fidelity work; kept for comparison).
+    MotorConstraint,
+}
 
 #[derive(Clone, Debug)]
 pub struct Character {
@@ -27,6 +43,53 @@ pub struct Character {
     /// Per DoF: PD target for a zero action, and target change per unit action.
     pub action_offset: Vec<f32>,
     pub action_scale: Vec<f32>,
+    pub servo: ServoModel,
+}
+
+/// Per-DoF armature and damping on the multibody (the servo's kd too, for implicit servos).
+fn set_passive_dynamics(
+    model: &CharacterModel,
+    joints: &[Option<MultibodyJointHandle>],
+    multibody_joints: &mut MultibodyJointSet,
+    servo: ServoModel,
+) {
+    for (body, joint) in model.bodies.iter().zip(joints) {
+        let dofs: &[usize] = match &body.joint {
+            JointKind::Hinge { dof } => std::slice::from_ref(dof),
+            JointKind::Ball { dofs } => dofs,
+            JointKind::Fixed | JointKind::Free => continue,
+        };
+        let Some((mb, link_id)) = joint.and_then(|h| multibody_joints.get_mut(h)) else {
+            continue;
+        };
+        let Some(first) = mb.link(link_id).map(|l| l.assembly_id()) else {
+            continue;
+        };
+        for (k, dof) in dofs.iter().enumerate() {
+            let d = &model.dofs[*dof];
+            let servo_damping = match servo {
+                ServoModel::ImplicitSpring => d.kd,
+                ServoModel::MotorConstraint => 0.0,
+            };
+            mb.armature_mut()[first + k] = d.armature as f32;
+            mb.damping_mut()[first + k] = (d.damping + servo_damping) as f32;
+        }
+    }
+}
+
+/// One implicit servo DoF at coordinate `q` moving at `qd`, `error` from its target: the spring's
+/// rest point and the servo's share of the joint damping. Unsaturated (|kp·error − kd·qd| within
+/// `limit`), the spring pulls toward the target with implicit damping `kd`: MuJoCo's position
+/// actuator under `implicitfast`. Saturated, the torque is the limit and, as for MuJoCo's clamped
+/// force, does not change with velocity: no damping, and the rest point where the spring pulls
+/// with the limit.
+fn implicit_servo(q: f32, error: f32, qd: f32, kp: f32, kd: f32, limit: f32) -> (f32, f32) {
+    let torque = kp * error - kd * qd;
+    if torque.abs() <= limit {
+        (q + error, kd)
+    } else {
+        (q + limit.copysign(torque) / kp, 0.0)
+    }
 }
 
 fn v3(a: [f64; 3]) -> Vector {
@@ -42,6 +105,7 @@ impl Character {
         colliders: &mut ColliderSet,
         multibody_joints: &mut MultibodyJointSet,
         collision_groups: InteractionGroups,
+        servo: ServoModel,
     ) -> Self {
         let mut handles: Vec<RigidBodyHandle> = Vec::with_capacity(model.bodies.len());
         let mut world_pos: Vec<Vector> = Vec::with_capacity(model.bodies.len());
@@ -132,22 +196,18 @@ impl Character {
             joints.push(joint);
             handles.push(h);
         }
-        // 3-DoF joints: zero action holds the neutral pose, ±1 reach the farther range end.
-        // Hinges (elbows, knees) have their neutral pose at a range end, where a neutral offset
-        // would waste half the action range; they map [-1, 1] onto their range, as IsaacGym's AMP
-        // humanoid does.
+        // Zero action holds the neutral pose (every joint at 0, within its range): a fresh policy
+        // stands instead of crouching. ±1 reach the farther range end, so the whole range is
+        // within the policy's action bound; hinges (elbows, knees) have their neutral pose at a
+        // range end, so half of their action range clamps there.
         let mut action_offset = Vec::with_capacity(model.dofs.len());
         let mut action_scale = Vec::with_capacity(model.dofs.len());
         for d in &model.dofs {
-            let hinge = matches!(model.bodies[d.body].joint, JointKind::Hinge { .. });
-            let offset = if hinge {
-                0.5 * (d.range[0] + d.range[1])
-            } else {
-                0f64.clamp(d.range[0], d.range[1])
-            };
+            let offset = 0f64.clamp(d.range[0], d.range[1]);
             action_offset.push(offset as f32);
             action_scale.push((d.range[1] - offset).max(offset - d.range[0]) as f32);
         }
+        set_passive_dynamics(model, &joints, multibody_joints, servo);
         Self {
             model: model.clone(),
             bodies: handles,
@@ -155,6 +215,7 @@ impl Character {
             joints,
             action_offset,
             action_scale,
+            servo,
         }
     }
 
@@ -184,43 +245,57 @@ impl Character {
             let Some((mb, link_id)) = multibody_joints.get_mut(*handle) else {
                 continue;
             };
-            let Some(link) = mb.link_mut(link_id) else {
+            let dofs: &[usize] = match &body.joint {
+                JointKind::Hinge { dof } => std::slice::from_ref(dof),
+                JointKind::Ball { dofs } => dofs,
+                JointKind::Fixed | JointKind::Free => continue,
+            };
+            let Some(link) = mb.link(link_id) else {
                 continue;
             };
-            let joint = &mut link.joint;
+            let first = link.assembly_id();
+            let joint = &link.joint;
+            let coords = joint.coords();
+            // Per DoF: its coordinate and the error to its target, in the coordinates' frame.
+            let mut errors = [0.0f32; 3];
             match &body.joint {
-                JointKind::Hinge { dof } => {
-                    let d = &self.model.dofs[*dof];
-                    joint.data.set_motor_position(
-                        JointAxis::AngX,
-                        targets[*dof],
-                        d.kp as f32,
-                        d.kd as f32,
-                    );
-                }
                 JointKind::Ball { dofs } => {
-                    let target = ball_target(targets, dofs);
-                    // rapier integrates a 3-DoF joint as joint_rot = exp(ω dt) · joint_rot, so the
-                    // error rotation on the left, as a rotation vector, is in the coordinates'
-                    // frame.
-                    let error = (target * joint.joint_rot().inverse())
+                    // rapier integrates a 3-DoF joint as joint_rot = exp(ω dt) · joint_rot and its
+                    // coordinates are integrated approximations, so the exact error rotation
+                    // (on the left, as a rotation vector) is added to the coordinates.
+                    let e = (ball_target(targets, dofs) * joint.joint_rot().inverse())
                         .normalize()
                         .to_scaled_axis();
-                    let coords = joint.coords();
-                    for (k, axis) in [JointAxis::AngX, JointAxis::AngY, JointAxis::AngZ]
-                        .into_iter()
-                        .enumerate()
-                    {
-                        let d = &self.model.dofs[dofs[k]];
-                        joint.data.set_motor_position(
-                            axis,
-                            coords[3 + k] + error[k],
-                            d.kp as f32,
-                            d.kd as f32,
-                        );
+                    errors = [e.x, e.y, e.z];
+                }
+                _ => errors[0] = targets[dofs[0]] - coords[3],
+            }
+            let mut velocities = [0.0f32; 3];
+            for (v, out) in mb.joint_velocity(link).iter().zip(&mut velocities) {
+                *out = *v;
+            }
+            let axes = [JointAxis::AngX, JointAxis::AngY, JointAxis::AngZ];
+            for (k, dof) in dofs.iter().enumerate() {
+                let d = &self.model.dofs[*dof];
+                let (kp, kd, limit) = (d.kp as f32, d.kd as f32, d.torque_limit as f32);
+                let q = coords[3 + k];
+                match self.servo {
+                    ServoModel::ImplicitSpring => {
+                        let (rest, damping) =
+                            implicit_servo(q, errors[k], velocities[k], kp, kd, limit);
+                        if let Some(link) = mb.link_mut(link_id) {
+                            link.joint.set_spring(3 + k, kp, rest);
+                        }
+                        mb.damping_mut()[first + k] = d.damping as f32 + damping;
+                    }
+                    ServoModel::MotorConstraint => {
+                        if let Some(link) = mb.link_mut(link_id) {
+                            link.joint
+                                .data
+                                .set_motor_position(axes[k], q + errors[k], kp, kd);
+                        }
                     }
                 }
-                JointKind::Fixed | JointKind::Free => {}
             }
         }
     }
@@ -248,7 +323,7 @@ fn geom_collider(g: &crate::mjcf::GeomDef, shift: Vector, groups: InteractionGro
     };
     builder
         .density(g.density as f32)
-        .friction(FRICTION)
+        .friction(g.friction as f32)
         .collision_groups(groups)
         .build()
 }

@@ -5,6 +5,7 @@ pub mod batch;
 pub mod bench;
 pub mod character;
 pub mod env;
+pub mod fidelity;
 pub mod mjcf;
 pub mod motion;
 pub mod obs;

@@ -53,6 +53,9 @@ pub struct GeomDef {
     pub pos: [f64; 3],
     /// kg / m^3
     pub density: f64,
+    /// Sliding friction coefficient (the first of MJCF's three `friction` numbers; rapier has no
+    /// torsional or rolling friction, so the other two must be MuJoCo's small defaults).
+    pub friction: f64,
 }
 
 impl GeomDef {
@@ -107,6 +110,10 @@ pub struct DofDef {
     pub kp: f64,
     pub kd: f64,
     pub torque_limit: f64,
+    /// Reflected rotor inertia added to the joint-space mass matrix (MJCF `armature`, kg·m²).
+    pub armature: f64,
+    /// Passive viscous joint damping (MJCF `damping`, N·m·s/rad).
+    pub damping: f64,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -157,6 +164,8 @@ impl CharacterModel {
             bodies: Vec::new(),
             dofs: Vec::new(),
             default_density: 1000.0,
+            joint_defaults: JointDefaults::default(),
+            default_friction: 1.0,
         };
         if root.tag_name().name() != "mujoco" {
             return Err(p.err(root, "the root element must be <mujoco>"));
@@ -184,8 +193,9 @@ impl CharacterModel {
                         p.actuator(a)?;
                     }
                 }
-                // Simulation options, visual defaults and assets do not change the character.
-                "option" | "default" | "visual" | "asset" | "size" | "statistic" | "contact" => {}
+                "default" => p.defaults(child)?,
+                // Simulation options, visual settings and assets do not change the character.
+                "option" | "visual" | "asset" | "size" | "statistic" | "contact" => {}
                 other => return Err(p.err(child, &format!("<{other}> is not supported"))),
             }
         }
@@ -215,7 +225,48 @@ struct Parser<'f> {
     bodies: Vec<BodyDef>,
     dofs: Vec<DofDef>,
     default_density: f64,
+    joint_defaults: JointDefaults,
+    /// MuJoCo's default sliding friction unless `<default><geom friction>` says otherwise.
+    default_friction: f64,
 }
+
+/// Joint attributes a `<default><joint>` sets for every hinge.
+#[derive(Clone, Copy, Debug, Default)]
+struct JointDefaults {
+    armature: f64,
+    damping: f64,
+}
+
+/// Attributes each element may carry; any other is an error, so a file never loads differently
+/// from what it says.
+const JOINT_ATTRS: &[&str] = &[
+    "name", "type", "axis", "range", "pos", "armature", "damping", "limited",
+];
+const DEFAULT_JOINT_ATTRS: &[&str] = &["armature", "damping", "limited"];
+const GEOM_ATTRS: &[&str] = &[
+    "name",
+    "type",
+    "size",
+    "pos",
+    "fromto",
+    "density",
+    "friction",
+    "contype",
+    "conaffinity",
+    "condim",
+    "rgba",
+    "material",
+    "quat",
+    "euler",
+];
+const DEFAULT_GEOM_ATTRS: &[&str] = &[
+    "friction",
+    "contype",
+    "conaffinity",
+    "condim",
+    "density",
+    "rgba",
+];
 
 fn dist3(a: [f64; 3], b: [f64; 3]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
@@ -232,6 +283,86 @@ impl Parser<'_> {
                 node.document().text_pos_at(node.range().start).row
             ),
         }
+    }
+
+    /// Refuses attributes outside `allowed`, naming the first one.
+    fn check_attrs(&self, node: roxmltree::Node, allowed: &[&str]) -> Result<(), MjcfError> {
+        match node.attributes().find(|a| !allowed.contains(&a.name())) {
+            Some(a) => Err(self.err(
+                node,
+                &format!("attribute `{}` is not supported here", a.name()),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// A non-negative number attribute, or `default` when absent.
+    fn non_negative(
+        &self,
+        node: roxmltree::Node,
+        attr: &str,
+        default: f64,
+    ) -> Result<f64, MjcfError> {
+        match self.floats(node, attr)? {
+            None => Ok(default),
+            Some(v) if v.len() == 1 && v[0] >= 0.0 => Ok(v[0]),
+            Some(_) => Err(self.err(node, &format!("`{attr}` must be one number >= 0"))),
+        }
+    }
+
+    /// Sliding friction from `friction="slide [torsion [rolling]]"`. rapier has only sliding
+    /// friction: torsional and rolling coefficients above MuJoCo's defaults (0.005, 0.0001) would
+    /// be ignored, so they are refused.
+    fn friction(&self, node: roxmltree::Node, default: f64) -> Result<f64, MjcfError> {
+        match self.floats(node, "friction")? {
+            None => Ok(default),
+            Some(v) if !v.is_empty() && v.len() <= 3 && v[0] >= 0.0 => {
+                if v.get(1).is_some_and(|t| *t > 0.005 + 1e-12)
+                    || v.get(2).is_some_and(|r| *r > 0.0001 + 1e-12)
+                {
+                    return Err(self.err(
+                        node,
+                        "torsional or rolling friction above MuJoCo's defaults is not supported",
+                    ));
+                }
+                Ok(v[0])
+            }
+            Some(_) => Err(self.err(node, "`friction` needs 1 to 3 numbers, the first >= 0")),
+        }
+    }
+
+    /// `<default>`: joint armature and damping, geom friction (and density) for every element.
+    /// Default classes are not supported.
+    fn defaults(&mut self, node: roxmltree::Node) -> Result<(), MjcfError> {
+        self.check_attrs(node, &[])?;
+        for child in node.children().filter(|n| n.is_element()) {
+            match child.tag_name().name() {
+                "joint" => {
+                    self.check_attrs(child, DEFAULT_JOINT_ATTRS)?;
+                    self.joint_defaults = JointDefaults {
+                        armature: self.non_negative(child, "armature", 0.0)?,
+                        damping: self.non_negative(child, "damping", 0.0)?,
+                    };
+                }
+                "geom" => {
+                    self.check_attrs(child, DEFAULT_GEOM_ATTRS)?;
+                    self.default_friction = self.friction(child, self.default_friction)?;
+                    if let Some(d) = self.floats(child, "density")? {
+                        match d.as_slice() {
+                            [d] if *d > 0.0 => self.default_density = *d,
+                            _ => return Err(self.err(child, "density must be one positive number")),
+                        }
+                    }
+                }
+                other => {
+                    return Err(self.err(
+                        child,
+                        &format!("<{other}> defaults (and default classes) are not supported"),
+                    ))
+                }
+            }
+        }
+        Ok(())
     }
 
     fn floats(&self, node: roxmltree::Node, attr: &str) -> Result<Option<Vec<f64>>, MjcfError> {
@@ -274,7 +405,7 @@ impl Parser<'_> {
             .map_or_else(|| format!("body{index}"), str::to_string);
         let pos = self.vec3(node, "pos", [0.0; 3])?;
         let mut geoms = Vec::new();
-        let mut hinges: Vec<(String, [f64; 3], [f64; 2])> = Vec::new();
+        let mut hinges: Vec<(String, [f64; 3], [f64; 2], JointDefaults)> = Vec::new();
         let mut free = false;
         for child in node.children().filter(|n| n.is_element()) {
             match child.tag_name().name() {
@@ -282,6 +413,19 @@ impl Parser<'_> {
                 "joint" => match child.attribute("type").unwrap_or("hinge") {
                     "free" => free = true,
                     "hinge" => {
+                        self.check_attrs(child, JOINT_ATTRS)?;
+                        let passive = JointDefaults {
+                            armature: self.non_negative(
+                                child,
+                                "armature",
+                                self.joint_defaults.armature,
+                            )?,
+                            damping: self.non_negative(
+                                child,
+                                "damping",
+                                self.joint_defaults.damping,
+                            )?,
+                        };
                         let jname = child
                             .attribute("name")
                             .ok_or_else(|| {
@@ -308,7 +452,7 @@ impl Parser<'_> {
                             }
                             _ => return Err(self.err(child, "needs `range=\"lower upper\"`")),
                         };
-                        hinges.push((jname, axis, range));
+                        hinges.push((jname, axis, range, passive));
                     }
                     other => {
                         return Err(
@@ -332,7 +476,7 @@ impl Parser<'_> {
             (Some(_), false, 1) => JointKind::Hinge { dof: self.dofs.len() },
             (Some(_), false, 3) => {
                 let unit = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-                if hinges.iter().zip(unit).any(|((_, a, _), u)| dist3(*a, u) > 1e-9) {
+                if hinges.iter().zip(unit).any(|((_, a, _, _), u)| dist3(*a, u) > 1e-9) {
                     return Err(self.err(node, "three hinges must be about x, y, z in that order"));
                 }
                 let n = self.dofs.len();
@@ -345,7 +489,7 @@ impl Parser<'_> {
                 ))
             }
         };
-        for (jname, axis, range) in hinges {
+        for (jname, axis, range, passive) in hinges {
             self.dofs.push(DofDef {
                 name: jname,
                 body: index,
@@ -354,6 +498,8 @@ impl Parser<'_> {
                 kp: 0.0,
                 kd: 0.0,
                 torque_limit: 0.0,
+                armature: passive.armature,
+                damping: passive.damping,
             });
         }
         self.bodies.push(BodyDef {
@@ -370,6 +516,8 @@ impl Parser<'_> {
     }
 
     fn geom(&self, node: roxmltree::Node) -> Result<GeomDef, MjcfError> {
+        self.check_attrs(node, GEOM_ATTRS)?;
+        let friction = self.friction(node, self.default_friction)?;
         let name = node.attribute("name").unwrap_or("").to_string();
         let size = self.floats(node, "size")?.unwrap_or_default();
         let density = match self.floats(node, "density")? {
@@ -432,6 +580,7 @@ impl Parser<'_> {
             shape,
             pos,
             density,
+            friction,
         })
     }
 
@@ -471,6 +620,30 @@ mod tests {
     use super::*;
 
     #[test]
+    fn unknown_attributes_and_unsupported_friction_are_errors_naming_them() {
+        let with = |from: &str, to: &str| {
+            let text = AMP_HUMANOID_XML.replacen(from, to, 1);
+            CharacterModel::parse(&text, "x.xml")
+                .unwrap_err()
+                .to_string()
+        };
+        let e = with("armature=\"0.01\"", "armature=\"0.01\" stiffness=\"3\"");
+        assert!(e.contains("stiffness"), "{e}");
+        let e = with(
+            "<joint name=\"abdomen_x\"",
+            "<joint name=\"abdomen_x\" frictionloss=\"1\"",
+        );
+        assert!(e.contains("frictionloss") && e.contains("abdomen_x"), "{e}");
+        let e = with(
+            "friction=\"1.0 0.005 0.0001\"",
+            "friction=\"1.0 0.5 0.0001\"",
+        );
+        assert!(e.contains("torsional"), "{e}");
+        let e = with("armature=\"0.01\"", "armature=\"-1\"");
+        assert!(e.contains("armature"), "{e}");
+    }
+
+    #[test]
     fn shipped_humanoid_matches_the_design() {
         let m = CharacterModel::amp_humanoid();
         assert_eq!(m.bodies.len(), 15);
@@ -500,6 +673,16 @@ mod tests {
         assert_eq!(fixed, 2, "the hands");
         let knee = m.dofs.iter().find(|d| d.name == "left_knee").expect("knee");
         assert_eq!((knee.kp, knee.kd, knee.torque_limit), (500.0, 50.0, 150.0));
+        // From <default><joint armature="0.01"> and <default><geom friction="1.0 ...">.
+        assert!(m
+            .dofs
+            .iter()
+            .all(|d| d.armature == 0.01 && d.damping == 0.0));
+        assert!(m
+            .bodies
+            .iter()
+            .flat_map(|b| &b.geoms)
+            .all(|g| g.friction == 1.0));
         let abdomen = m
             .dofs
             .iter()

@@ -1,7 +1,7 @@
 //! A simulated world: floor, character, and (later) a benchmark room. Stepping, and exact
 //! snapshot/restore by cloning every piece of rapier state.
 
-use crate::character::Character;
+use crate::character::{Character, ServoModel};
 use crate::mjcf::CharacterModel;
 use crate::room::{build_room, Room};
 use lhm_scenes::{Catalogue, Task};
@@ -29,6 +29,10 @@ pub struct SimConfig {
     /// Tests and debugging only: weld the root to the world where it spawns, so limbs can be
     /// exercised without balancing.
     pub pin_root: bool,
+    /// How the PD servos act (see [`ServoModel`]).
+    pub servo: ServoModel,
+    /// rapier's PGS iterations inside each substep (`num_internal_pgs_iterations`).
+    pub solver_iterations: usize,
 }
 
 impl Default for SimConfig {
@@ -47,6 +51,8 @@ impl Default for SimConfig {
             spawn_height: 0.89,
             self_collisions: true,
             pin_root: false,
+            servo: ServoModel::ImplicitSpring,
+            solver_iterations: 1,
         }
     }
 }
@@ -77,6 +83,8 @@ pub struct World {
     pub state: PhysicsState,
     pub character: Character,
     pub room: Room,
+    /// The ground plane's collider (contacts with it are the feet's ground reaction).
+    pub floor_collider: ColliderHandle,
     pipeline: PhysicsPipeline,
     gravity: Vector,
     pub control_steps: u64,
@@ -134,7 +142,7 @@ impl World {
             soft_bodies: SoftBodySet::new(),
         };
         let floor = state.bodies.insert(RigidBodyBuilder::fixed().build());
-        state.colliders.insert_with_parent(
+        let floor_collider = state.colliders.insert_with_parent(
             ColliderBuilder::halfspace(rapier3d::na::Unit::new_unchecked(Vector::Z))
                 .friction(1.0)
                 .build(),
@@ -162,6 +170,7 @@ impl World {
                     InteractionTestMode::And,
                 )
             },
+            config.servo,
         );
         if config.pin_root {
             let root = character.root();
@@ -180,6 +189,7 @@ impl World {
         let params = IntegrationParameters {
             dt: 1.0 / (config.control_hz * steps as f32),
             num_solver_iterations: (config.physics_steps_per_control() / steps).max(1),
+            num_internal_pgs_iterations: config.solver_iterations.max(1),
             normalized_prediction_distance: config.prediction_distance,
             ..IntegrationParameters::default()
         };
@@ -189,6 +199,7 @@ impl World {
             state,
             character,
             room,
+            floor_collider,
             pipeline: PhysicsPipeline::new(),
             gravity: Vector::new(0.0, 0.0, -9.81),
             control_steps: 0,
