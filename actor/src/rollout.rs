@@ -247,6 +247,8 @@ impl Rollout {
                     fell: result.fell,
                     physics_invalid: result.physics_invalid,
                     task_id: slot.env.task.id.clone(),
+                    reached: slot.env.reached,
+                    demo_start: false,
                 };
                 if result.truncated && !result.physics_invalid {
                     truncated_obs.push((i, slot.env.observation()));

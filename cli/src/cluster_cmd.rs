@@ -152,9 +152,23 @@ fn progress_message(r: &IterationReport) -> String {
     } else {
         "-".into()
     };
+    let pct = |x: f64| {
+        if x.is_finite() {
+            format!("{:.0}%", 100.0 * x)
+        } else {
+            "-".into()
+        }
+    };
+    let disc = r.disc_accuracy.map_or("-".into(), |a| format!("{a:.2}"));
     format!(
-        "| {:.0} samples/s | return {:.2} | success {success} | {} episodes | {} actors",
-        r.samples_per_s, r.mean_return, r.episodes, r.actors_alive
+        "| {:.0} samples/s | return {:.2} | success {success} | falls {} | reach {} | disc {disc} | style {:.3} | {} episodes | {} actors",
+        r.samples_per_s,
+        r.mean_return,
+        pct(r.fall_fraction),
+        pct(r.reach_rate),
+        r.style_reward,
+        r.episodes,
+        r.actors_alive
     )
 }
 
@@ -166,10 +180,18 @@ fn run_with_progress(
 ) -> Result<()> {
     let bar = progress_bar(config.max_iterations);
     let bar_for_hook = bar.clone();
+    // Without a terminal (containers, CI, `2>log`) the bar draws nothing: plain lines instead,
+    // one per 30 s at most.
+    let plain = !std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let mut last_line: Option<std::time::Instant> = None;
     let hooks = Hooks {
         on_iteration: Some(Box::new(move |r: &IterationReport| {
             bar_for_hook.set_position(r.iteration);
             bar_for_hook.set_message(progress_message(r));
+            if plain && last_line.is_none_or(|t| t.elapsed() >= Duration::from_secs(30)) {
+                eprintln!("iteration {} {}", r.iteration, progress_message(r));
+                last_line = Some(std::time::Instant::now());
+            }
         })),
         on_listening: Some(Box::new(&mut on_listening)),
     };

@@ -6,6 +6,7 @@ mod cluster_bench;
 mod cluster_cmd;
 mod demo;
 mod motion_cmd;
+mod plot_cmd;
 mod record_cmd;
 mod render_cmd;
 mod scenes_cmd;
@@ -42,6 +43,8 @@ enum Command {
     Motion(motion_cmd::MotionArgs),
     /// Animated GIF of the character in a benchmark room under a simple policy.
     RenderRollout(render_cmd::RenderRolloutArgs),
+    /// Training curves of a run (RUN_DIR/metrics.csv) as one PNG.
+    Plot(plot_cmd::PlotArgs),
 }
 
 /// candle allocates a fresh buffer per tensor op and glibc serves large ones with mmap, so every
@@ -75,6 +78,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Motion(args) => motion_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::RenderRollout(args) => render_cmd::run(args).map(|()| ExitCode::SUCCESS),
+        Command::Plot(args) => plot_cmd::run(args).map(|()| ExitCode::SUCCESS),
     };
     match result {
         Ok(code) => code,

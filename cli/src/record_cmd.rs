@@ -115,6 +115,8 @@ pub fn run(args: RecordArgs) -> Result<()> {
         fell: last.fell,
         physics_invalid: last.physics_invalid,
         task_id: task.id.clone(),
+        reached: env.reached,
+        demo_start: false,
     };
     let frames = capture.finish(stats.clone());
     record_episode(

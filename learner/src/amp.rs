@@ -41,12 +41,14 @@ impl Default for AmpConfig {
     fn default() -> Self {
         Self {
             disc: MlpConfig::default(),
+            // IsaacGymEnvs HumanoidAMP: disc lr 5e-5, logit reg 0.05, grad penalty 5, weight
+            // decay 1e-4.
             adam: AdamConfig {
-                lr: 1e-4,
+                lr: 5e-5,
                 ..AdamConfig::default()
             },
             grad_penalty: 5.0,
-            logit_reg: 0.01,
+            logit_reg: 0.05,
             weight_decay: 1e-4,
             max_grad_norm: None,
             epochs: 1,

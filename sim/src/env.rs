@@ -30,6 +30,11 @@ pub struct EnvConfig {
     pub map_cell: f32,
     /// A body other than feet and hands below this height (m) is a fall.
     pub fall_height: f32,
+    /// The root (pelvis) below this height (m) is a fall too (early termination as in the AMP
+    /// anchors: fallen frames never reach the discriminator).
+    pub root_fall_height: f32,
+    /// An episode "reached" its object once the root came this close (m, horizontally).
+    pub reach_distance: f32,
     /// Time limit of an episode, control steps (truncation, not termination).
     pub max_episode_steps: u32,
     /// Walking and carrying speeds the reward asks for (m/s).
@@ -45,12 +50,17 @@ impl Default for EnvConfig {
             weights: RewardWeights::default(),
             release_retreat: ReleaseRetreat::default(),
             switching: SwitchParams::default(),
-            amp_frames: 10,
+            // IsaacGymEnvs HumanoidAMP's numAMPObsSteps: 2 (a 10-frame window let the
+            // discriminator win within ~20 iterations).
+            amp_frames: 2,
             map_cells: 8,
             map_cell: 0.25,
             fall_height: 0.15,
+            root_fall_height: 0.4,
+            reach_distance: 0.6,
             max_episode_steps: 1200,
-            walk_speed: 1.5,
+            // The demo walks are ~1 m/s; 1.5 m/s asked for a gait no clip shows.
+            walk_speed: 1.0,
             carry_speed: 1.0,
             lift_height: 0.3,
         }
@@ -67,6 +77,9 @@ pub struct RewardTerms {
     pub place: f32,
     pub power: f32,
     pub release_retreat: f32,
+    pub facing: f32,
+    /// 1 on the step a pair is handed off within the success radius.
+    pub success: f32,
 }
 
 #[derive(Clone, Debug)]
@@ -97,6 +110,8 @@ pub struct TaskEnv {
     hands: [usize; 2],
     /// Height of each object at its start, for the lift term.
     start_z: Vec<f32>,
+    /// The root came within `reach_distance` of the current object.
+    pub reached: bool,
 }
 
 /// Snapshot of a whole environment: world, cycle state, AMP history, counters.
@@ -140,6 +155,7 @@ impl TaskEnv {
             start_z: task.objects.iter().map(|o| o.pos[2] as f32).collect(),
             config,
             world,
+            reached: false,
         }
     }
 
@@ -242,6 +258,7 @@ impl TaskEnv {
             let w = &self.config;
             terms.locomotion =
                 rewards::locomotion(root.pos, root.linvel, obj.pos, w.walk_speed, 0.6);
+            terms.facing = rewards::facing(root.pos, root.rot * Vector::X, obj.pos, 0.6);
             terms.hands = rewards::hands_to_object(to_local(lh), to_local(rh), half, 20.0);
             terms.lift = rewards::lift(obj.pos.z, self.start_z[i], w.lift_height);
             terms.carry = rewards::carry(obj.pos, obj.linvel, goal, w.carry_speed, 0.3);
@@ -258,7 +275,14 @@ impl TaskEnv {
                 hand_d(rh),
                 d_goal,
             );
+            self.reached |= d_root < w.reach_distance;
+            let before = self.cycles.results.len();
             handoff = self.cycles.update(d_goal, obj.linvel.length());
+            if self.cycles.results.len() > before
+                && self.cycles.results.last().is_some_and(|r| r.success)
+            {
+                terms.success = 1.0;
+            }
         }
         let w = &self.config.weights;
         let reward = w.locomotion * terms.locomotion
@@ -267,9 +291,12 @@ impl TaskEnv {
             + w.carry * terms.carry
             + w.place * terms.place
             + w.power * terms.power
-            + w.release_retreat * terms.release_retreat;
+            + w.release_retreat * terms.release_retreat
+            + w.facing * terms.facing
+            + w.success * terms.success;
         let heights: Vec<f32> = bodies.iter().map(|b| b.pos.z).collect();
-        let fell = fallen(&heights, &self.exempt, self.config.fall_height);
+        let fell = fallen(&heights, &self.exempt, self.config.fall_height)
+            || bodies[0].pos.z < self.config.root_fall_height;
         let done = fell || handoff == Handoff::Done;
         StepResult {
             reward,

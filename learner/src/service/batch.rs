@@ -18,8 +18,25 @@ pub struct EpisodeSummary {
     /// Succeeded / attempted (object, goal) pairs.
     pub success_rate: f64,
     pub falls: u64,
+    /// Episodes whose root came within the reach distance of the current object, and how many
+    /// of all episodes started from the task's own start (not a demo frame) did.
+    pub reached: u64,
+    pub task_start_episodes: u64,
+    pub task_start_reached: u64,
     pub mean_task_reward: f64,
     pub mean_style_reward: f64,
+}
+
+impl EpisodeSummary {
+    /// Falls per finished episode (NaN with no episodes).
+    pub fn fall_fraction(&self) -> f64 {
+        self.falls as f64 / self.episodes as f64
+    }
+
+    /// Reach rate over episodes from task starts (NaN with none).
+    pub fn reach_rate(&self) -> f64 {
+        self.task_start_reached as f64 / self.task_start_episodes as f64
+    }
 }
 
 pub struct Assembled {
@@ -77,6 +94,11 @@ pub fn assemble(
             attempted += u64::from(e.cycles_attempted);
             succeeded += u64::from(e.cycles_succeeded);
             summary.falls += u64::from(e.fell);
+            summary.reached += u64::from(e.reached);
+            if !e.demo_start {
+                summary.task_start_episodes += 1;
+                summary.task_start_reached += u64::from(e.reached);
+            }
         }
     }
     if summary.episodes > 0 {

@@ -30,6 +30,23 @@ pub fn locomotion(
     0.5 * (-0.5 * d * d).exp() + 0.5 * (-2.0 * speed_gap * speed_gap).exp()
 }
 
+/// Facing the object: the cosine between the root's horizontal heading and the horizontal
+/// direction to the object, floored at 0; 1 once within `near` metres (where turning to face it
+/// no longer matters). The median task object starts 93° off the start heading.
+pub fn facing(root_pos: Vector, heading: Vector, object_pos: Vector, near: f32) -> f32 {
+    let to = flat(object_pos - root_pos);
+    let d = to.length();
+    if d < near {
+        return 1.0;
+    }
+    let h = flat(heading);
+    let hl = h.length();
+    if hl < 1e-6 {
+        return 0.0;
+    }
+    (h.dot(to) / (hl * d)).max(0.0)
+}
+
 /// Distance from `p` to an axis-aligned box (object frame) of half extents `half` (0 inside).
 pub fn distance_to_box(p_local: Vector, half: Vector) -> f32 {
     let q = p_local.abs() - half;
@@ -147,6 +164,10 @@ pub struct RewardWeights {
     pub power: f32,
     /// 0 during pretraining, > 0 for release-and-retreat fine-tuning.
     pub release_retreat: f32,
+    pub facing: f32,
+    /// One-off reward on the step a pair is placed within the success radius: a successful
+    /// cycle ends the episode (terminal), so it must pay at least what staying on would.
+    pub success: f32,
 }
 
 impl Default for RewardWeights {
@@ -159,6 +180,8 @@ impl Default for RewardWeights {
             place: 0.3,
             power: 2e-5,
             release_retreat: 0.0,
+            facing: 0.1,
+            success: 20.0,
         }
     }
 }
@@ -187,6 +210,25 @@ mod tests {
         assert_eq!(
             locomotion(v(0.0, 0.0, 5.0), Vector::ZERO, obj, 1.5, 0.5),
             standing
+        );
+    }
+
+    #[test]
+    fn facing_rewards_turning_toward_the_object() {
+        let obj = v(0.0, 3.0, 0.4);
+        let root = v(0.0, 0.0, 0.9);
+        assert!((facing(root, v(0.0, 1.0, 0.0), obj, 0.6) - 1.0).abs() < 1e-6);
+        assert_eq!(facing(root, v(1.0, 0.0, 0.0), obj, 0.6), 0.0, "sideways");
+        assert_eq!(facing(root, v(0.0, -1.0, 0.0), obj, 0.6), 0.0, "away");
+        let half = facing(root, v(1.0, 1.0, 0.3), obj, 0.6);
+        assert!(
+            (half - std::f32::consts::FRAC_1_SQRT_2).abs() < 1e-5,
+            "{half}"
+        );
+        assert_eq!(
+            facing(v(0.0, 2.7, 0.9), v(1.0, 0.0, 0.0), obj, 0.6),
+            1.0,
+            "near"
         );
     }
 

@@ -1,0 +1,127 @@
+//! `runs/<run>/metrics.csv`: one row per iteration, appended and flushed as it is made, so a killed
+//! learner loses no row it wrote and a resumed one continues the same file (`lhm plot` reads it).
+
+use std::fs::{File, OpenOptions};
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+
+/// The columns, in order. Missing values are written as empty fields.
+pub const COLUMNS: &[&str] = &[
+    "iteration",
+    "samples",
+    "wall_s",
+    "samples_per_s",
+    "update_s",
+    "episodes",
+    "mean_return",
+    "mean_episode_length",
+    "success_rate",
+    "fall_fraction",
+    "reach_rate",
+    "disc_accuracy",
+    "style_reward",
+    "task_reward",
+    "policy_loss",
+    "value_loss",
+    "approx_kl",
+    "clip_fraction",
+    "stale_chunks",
+    "accepted_chunks",
+];
+
+pub struct MetricsCsv {
+    path: PathBuf,
+    file: File,
+}
+
+impl MetricsCsv {
+    /// Opens `path` for appending. A file whose header is not [`COLUMNS`] (an older layout) is
+    /// kept as `<path>.old` (never overwritten: `.old.2`, … ) and a new one started.
+    pub fn open(path: &Path) -> std::io::Result<Self> {
+        let header = COLUMNS.join(",");
+        if let Ok(f) = File::open(path) {
+            let mut first = String::new();
+            BufReader::new(f).read_line(&mut first)?;
+            if !first.is_empty() && first.trim_end() != header {
+                let keep = (1u32..)
+                    .map(|k| {
+                        let suffix = if k == 1 {
+                            "old".into()
+                        } else {
+                            format!("old.{k}")
+                        };
+                        path.with_extension(format!("csv.{suffix}"))
+                    })
+                    .find(|p| !p.exists())
+                    .unwrap_or_else(|| path.with_extension("csv.old"));
+                std::fs::rename(path, keep)?;
+            }
+        }
+        let mut file = OpenOptions::new().create(true).append(true).open(path)?;
+        if file.metadata()?.len() == 0 {
+            writeln!(file, "{header}")?;
+            file.flush()?;
+        }
+        Ok(Self {
+            path: path.to_owned(),
+            file,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Appends one row: `values` by column name; absent or non-finite values are empty fields.
+    pub fn append(&mut self, values: &[(&str, f64)]) -> std::io::Result<()> {
+        let row: Vec<String> = COLUMNS
+            .iter()
+            .map(|c| {
+                values
+                    .iter()
+                    .find(|(k, _)| k == c)
+                    .filter(|(_, v)| v.is_finite())
+                    .map_or(String::new(), |(_, v)| format!("{v}"))
+            })
+            .collect();
+        writeln!(self.file, "{}", row.join(","))?;
+        self.file.flush()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_append_across_reopens_and_an_old_layout_is_kept_aside() {
+        let dir = std::env::temp_dir().join(format!("lhm-metrics-csv-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("metrics.csv");
+        std::fs::write(&path, "iteration,old_column\n1,2\n").unwrap();
+        let mut m = MetricsCsv::open(&path).unwrap();
+        m.append(&[
+            ("iteration", 1.0),
+            ("mean_return", 2.5),
+            ("reach_rate", f64::NAN),
+        ])
+        .unwrap();
+        drop(m);
+        let mut m = MetricsCsv::open(&path).unwrap();
+        m.append(&[("iteration", 2.0)]).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 3, "{text}");
+        assert_eq!(lines[0], COLUMNS.join(","));
+        let row: Vec<&str> = lines[1].split(',').collect();
+        assert_eq!(row.len(), COLUMNS.len());
+        assert_eq!(row[0], "1");
+        assert_eq!(row[6], "2.5");
+        assert_eq!(row[10], "", "NaN is an empty field");
+        assert!(lines[2].starts_with("2,"));
+        let old = std::fs::read_to_string(dir.join("metrics.csv.old")).unwrap();
+        assert!(old.contains("old_column"), "the old file is kept");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
