@@ -12,6 +12,7 @@ use lhm_nets::{ActorCritic, SplitMix64};
 use lhm_protos::{EpisodeStats, Role, TrajectoryChunk, WireMessage};
 use lhm_scenes::{Benchmark, Catalogue, Task};
 use lhm_sim::env::TaskEnv;
+use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::CharacterModel;
 
 use lhm_cluster::RunSpec;
@@ -79,6 +80,8 @@ pub struct Rollout {
     env0_episodes: u64,
     capture: Option<EpisodeCapture>,
     policy_version: u64,
+    /// Reference motion for demo starts (loaded when the run spec asks for them).
+    demo: Option<DemoMotion>,
 }
 
 impl Rollout {
@@ -117,6 +120,19 @@ impl Rollout {
         if spec.chunk_steps == 0 {
             return Err(RolloutError::Spec("chunk_steps must be > 0".into()));
         }
+        let demo = if spec.env.demo_start_probability > 0.0 {
+            let dir = lhm_sim::motion::default_dir();
+            let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&spec.env, &spec.sim))
+                .map_err(|e| {
+                    RolloutError::Spec(format!(
+                        "the run starts {:.0}% of episodes from reference motion: {e}",
+                        100.0 * spec.env.demo_start_probability
+                    ))
+                })?;
+            Some(demo)
+        } else {
+            None
+        };
         let mut rollout = Self {
             model,
             catalogue: bench.catalogue.clone(),
@@ -131,6 +147,7 @@ impl Rollout {
             env0_episodes: 0,
             capture: None,
             policy_version: 0,
+            demo,
             spec,
         };
         for _ in 0..num_envs.max(1) {
@@ -168,16 +185,26 @@ impl Rollout {
         self.slots.len()
     }
 
-    /// An environment on a task drawn uniformly from the task set.
+    /// An environment on a task drawn uniformly from the task set, started from a reference
+    /// motion frame with the run's demo-start probability.
     fn fresh_env(&mut self) -> TaskEnv {
         let task = &self.tasks[self.rng.below(self.tasks.len())];
-        TaskEnv::new(
+        let mut env = TaskEnv::new(
             &self.model,
             task,
             &self.catalogue,
             self.spec.sim.clone(),
             self.spec.env.clone(),
-        )
+        );
+        if let Some(demo) = &self.demo {
+            let rng = &mut self.rng;
+            if (rng.next_f64() as f32) < self.spec.env.demo_start_probability {
+                if let Some((clip, t)) = demo.sample_start(&mut || rng.next_f64()) {
+                    env.start_from_demo(demo, clip, t);
+                }
+            }
+        }
+        env
     }
 
     /// The environment `i` (e.g. to capture its poses for recording).
@@ -248,7 +275,7 @@ impl Rollout {
                     physics_invalid: result.physics_invalid,
                     task_id: slot.env.task.id.clone(),
                     reached: slot.env.reached,
-                    demo_start: false,
+                    demo_start: slot.env.demo_start,
                 };
                 if result.truncated && !result.physics_invalid {
                     truncated_obs.push((i, slot.env.observation()));

@@ -95,6 +95,31 @@ fn query_latest(
     Ok(newest)
 }
 
+/// How long an actor that sent its share of a version waits for the next one before it runs
+/// on (a learner that lost another actor still gets data).
+const SYNC_WAIT: Duration = Duration::from_secs(20);
+
+/// Waits up to `limit` for weights newer than `version` (`None`: none came, or a stop request).
+fn wait_for_newer(
+    weights_sub: &zenoh::pubsub::Subscriber<
+        zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>,
+    >,
+    version: u64,
+    limit: Duration,
+) -> Option<ReceivedPolicy> {
+    let until = Instant::now() + limit;
+    while Instant::now() < until && !shutdown::requested() {
+        if let Ok(Some(sample)) = weights_sub.recv_timeout(Duration::from_millis(50)) {
+            match decode_policy(&sample.payload().to_bytes()) {
+                Ok(p) if p.version > version => return Some(p),
+                Ok(_) => {}
+                Err(e) => tracing::warn!("ignoring weights: {e}"),
+            }
+        }
+    }
+    None
+}
+
 pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
     keys::check_chunk("run id", &config.run_id).map_err(ClusterError::from)?;
     keys::check_chunk("actor id", &config.actor_id).map_err(ClusterError::from)?;
@@ -166,6 +191,8 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
         ..ActorSummary::default()
     };
     let started = Instant::now();
+    let mut sets_at_version = 0u32;
+    let mut version_counted = policy.version;
     let mut last_metrics = Instant::now();
     let mut steps_at_metrics = 0u64;
     loop {
@@ -208,12 +235,31 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
             }
         }
         summary.poisoned_chunks += out.poisoned_chunks;
+        let emitted_set = !out.chunks.is_empty() || out.poisoned_chunks > 0;
         for chunk in out.chunks {
             if config.publish {
                 let bytes = chunk.encode_checked().map_err(ClusterError::from)?;
                 traj.put(bytes).wait().map_err(zerr)?;
             }
             summary.chunks_sent += 1;
+        }
+        if emitted_set {
+            sets_at_version += 1;
+            let quota = policy.spec.chunk_sets_per_version;
+            if quota > 0 && sets_at_version >= quota {
+                if let Some(p) = wait_for_newer(&weights_sub, policy.version, SYNC_WAIT) {
+                    if p.spec != policy.spec {
+                        rollout.set_spec(p.spec.clone());
+                    }
+                    policy = p;
+                    summary.policy_swaps += 1;
+                    summary.last_version = policy.version;
+                }
+            }
+        }
+        if policy.version != version_counted {
+            version_counted = policy.version;
+            sets_at_version = 0;
         }
         if last_metrics.elapsed() >= Duration::from_secs(5) {
             let dt = last_metrics.elapsed().as_secs_f64();

@@ -27,6 +27,7 @@ fn chunks_are_whole_versioned_and_valid() {
         tasks: TaskSet::Ids(vec!["train-0001.p1".into(), "train-0002.p2".into()]),
         chunk_steps: 12,
         record_every_episodes: 1,
+        chunk_sets_per_version: 0,
     };
     let ac = ActorCritic::new(spec.obs_dim, spec.act_dim, &spec.actor_critic).unwrap();
     let mut rollout = Rollout::new(spec.clone(), &bench, "run", "a", Role::Teacher1, 2, 7).unwrap();
@@ -76,6 +77,7 @@ fn a_spec_that_does_not_fit_the_environment_is_refused() {
         tasks: TaskSet::TrainSingleObject,
         chunk_steps: 8,
         record_every_episodes: 0,
+        chunk_sets_per_version: 0,
     };
     let err = Rollout::new(spec, &bench, "run", "a", Role::Teacher1, 1, 0)
         .err()

@@ -210,7 +210,7 @@ fn run_with_progress(
 
 pub fn train(args: TrainArgs) -> Result<()> {
     shutdown::install();
-    let config = args.learner.train_config()?;
+    let mut config = args.learner.train_config()?;
     let demo = args.learner.demo(&config)?;
     let port = match args.port {
         0 => std::net::TcpListener::bind("127.0.0.1:0")
@@ -229,6 +229,12 @@ pub fn train(args: TrainArgs) -> Result<()> {
         .actors
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from))
         .max(1);
+    if config.chunk_sets_per_version == 0 {
+        // The local actors share the learner's cores: each sends its share of one batch per
+        // version and waits for the update (free-running, half the chunks went stale).
+        let per_set = actors * args.envs.max(1) * config.chunk_steps.max(1) as usize;
+        config.chunk_sets_per_version = config.batch_steps.div_ceil(per_set).max(1) as u32;
+    }
     let exe = std::env::current_exe().context("locating the lhm executable")?;
     let run_dir = config.run_dir();
     std::fs::create_dir_all(&run_dir).with_context(|| format!("creating {}", run_dir.display()))?;

@@ -58,4 +58,9 @@ pub struct RunSpec {
     pub chunk_steps: u32,
     /// Each actor sends the poses of one in this many finished episodes for recording (0: none).
     pub record_every_episodes: u32,
+    /// Each actor sends this many sets of chunks (one chunk per environment) per policy version,
+    /// then waits for the next weights (a bounded time), so collection and learning take turns
+    /// on shared cores and no chunk goes stale; 0: actors run free.
+    #[serde(default)]
+    pub chunk_sets_per_version: u32,
 }

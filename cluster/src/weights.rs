@@ -101,6 +101,7 @@ mod tests {
             tasks: crate::TaskSet::TrainSingleObject,
             chunk_steps: 16,
             record_every_episodes: 0,
+            chunk_sets_per_version: 0,
         }
     }
 

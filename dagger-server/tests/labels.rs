@@ -17,6 +17,7 @@ fn spec() -> RunSpec {
         tasks: TaskSet::TrainSingleObject,
         chunk_steps: 8,
         record_every_episodes: 0,
+        chunk_sets_per_version: 0,
     }
 }
 

@@ -223,9 +223,12 @@ impl AmpTrainer {
         let disc = Discriminator::new(feature_dim, &config.disc, &mut rng, DType::F32)?;
         let vars = Self::vars_of(&disc);
         let adam = Adam::new(config.adam.clone(), &vars)?;
-        let feature_norm = config
-            .normalize_features
-            .then(|| RunningMeanStd::new(feature_dim));
+        let feature_norm = config.normalize_features.then(|| {
+            let mut norm = RunningMeanStd::new(feature_dim);
+            // A floor of 0.1 on every feature's std.
+            norm.epsilon = 1e-2;
+            norm
+        });
         let replay = ReplayBuffer::new(feature_dim, config.replay_capacity);
         Ok(Self {
             config,
@@ -368,8 +371,12 @@ impl AmpTrainer {
                 demo.len()
             )));
         }
+        // Fitted on both sides: fitted on demo only, features the walking clips barely vary
+        // (root height: 1 cm std) put every agent frame at the clip, and the discriminator won
+        // on them alone.
         if let Some(norm) = &mut self.feature_norm {
             norm.update(demo)?;
+            norm.update(agent)?;
         }
         let (n_agent, n_demo) = (agent.len() / dim, demo.len() / dim);
         let mb_size = self.config.minibatch_size.clamp(1, n_agent);

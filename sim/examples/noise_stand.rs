@@ -27,7 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         acc - 6.0
     };
-    for id in ["train-0001-a", "train-0002-a", "train-0003-b"] {
+    for id in ["train-0001", "train-0002", "train-0003"] {
         let (_, task) = bench.task(id).ok_or(format!("no task {id}"))?;
         let mut env = TaskEnv::new(
             &model,

@@ -3,9 +3,11 @@
 //! together. Each piece stays a small pure function in `obs` and `task`.
 
 use crate::mjcf::{CharacterModel, JointKind};
+use crate::motion::demo::DemoMotion;
+use crate::motion::retarget::KinematicPose;
 use crate::obs::{
-    amp_frame, amp_frame_dim, obstacle_map, proprioception, proprioception_dim, task_observation,
-    AmpHistory, BodyState, TASK_OBS_DIM,
+    amp_frame, amp_frame_dim, finite_difference_states, obstacle_map, proprioception,
+    proprioception_dim, task_observation, AmpHistory, BodyState, TASK_OBS_DIM,
 };
 use crate::task::cycles::{CycleTracker, Handoff, SwitchParams};
 use crate::task::rewards::{self, ReleaseRetreat, RewardWeights};
@@ -14,6 +16,7 @@ use crate::world::{SimConfig, Snapshot, World};
 use lhm_scenes::geometry::Rect;
 use lhm_scenes::routes::obstacle_rect;
 use lhm_scenes::{Catalogue, Task};
+use rapier3d::math::Rotation;
 use rapier3d::math::Vector;
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +38,10 @@ pub struct EnvConfig {
     pub root_fall_height: f32,
     /// An episode "reached" its object once the root came this close (m, horizontally).
     pub reach_distance: f32,
+    /// Probability that an episode starts from a reference-motion frame (reference-state
+    /// initialisation, as AMP/ASE/TokenHSI) instead of the task's start pose. Needs the motion
+    /// clips on the actor's machine.
+    pub demo_start_probability: f32,
     /// Time limit of an episode, control steps (truncation, not termination).
     pub max_episode_steps: u32,
     /// Walking and carrying speeds the reward asks for (m/s).
@@ -58,6 +65,7 @@ impl Default for EnvConfig {
             fall_height: 0.15,
             root_fall_height: 0.4,
             reach_distance: 0.6,
+            demo_start_probability: 0.0,
             max_episode_steps: 1200,
             // The demo walks are ~1 m/s; 1.5 m/s asked for a gait no clip shows.
             walk_speed: 1.0,
@@ -112,6 +120,10 @@ pub struct TaskEnv {
     start_z: Vec<f32>,
     /// The root came within `reach_distance` of the current object.
     pub reached: bool,
+    /// Body poses at the previous control step: AMP velocities are backward differences.
+    prev_bodies: Vec<BodyState>,
+    /// The episode started from a reference-motion frame.
+    pub demo_start: bool,
 }
 
 /// Snapshot of a whole environment: world, cycle state, AMP history, counters.
@@ -121,6 +133,8 @@ pub struct EnvSnapshot {
     cycles: CycleTracker,
     amp: AmpHistory,
     steps: u32,
+    prev_bodies: Vec<BodyState>,
+    reached: bool,
 }
 
 impl TaskEnv {
@@ -138,7 +152,8 @@ impl TaskEnv {
             model.body_index("right_hand").unwrap_or(0),
         ];
         let mut amp = AmpHistory::new(config.amp_frames, amp_frame_dim(model));
-        amp.push(amp_frame(model, &world.body_states()));
+        let prev_bodies = world.body_states();
+        amp.push(amp_frame(model, &prev_bodies));
         Self {
             model: model.clone(),
             task: task.clone(),
@@ -156,7 +171,48 @@ impl TaskEnv {
             config,
             world,
             reached: false,
+            prev_bodies,
+            demo_start: false,
         }
+    }
+
+    /// Reference-state initialisation: the character moves as `clip` of `demo` does at time `t`,
+    /// placed at the task's start (root over the start position, heading turned to the start
+    /// yaw), with the AMP history filled from the clip's preceding frames. For a fresh
+    /// environment (before its first step).
+    pub fn start_from_demo(&mut self, demo: &DemoMotion, clip: usize, t: f32) {
+        let (states, prev) = demo.start_states(clip, t);
+        let Some(root) = states.first() else { return };
+        let pose = demo.pose_at(clip, t);
+        // The rigid motion taking the clip's root heading frame onto the task's start.
+        let clip_yaw = {
+            let f = root.rot * Vector::X;
+            f.y.atan2(f.x)
+        };
+        let turn = Rotation::from_rotation_z(self.task.start.yaw as f32 - clip_yaw);
+        let start = Vector::new(
+            self.task.start.pos[0] as f32,
+            self.task.start.pos[1] as f32,
+            0.0,
+        );
+        let origin = Vector::new(root.pos.x, root.pos.y, 0.0);
+        let place = |p: Vector| start + turn * (p - origin);
+        let moved = |b: &BodyState| BodyState {
+            pos: place(b.pos),
+            rot: (turn * b.rot).normalize(),
+            linvel: turn * b.linvel,
+            angvel: turn * b.angvel,
+        };
+        let states: Vec<BodyState> = states.iter().map(moved).collect();
+        let placed = KinematicPose {
+            root_pos: place(pose.root_pos),
+            root_rot: (turn * pose.root_rot).normalize(),
+            local_rots: pose.local_rots,
+        };
+        self.world.set_character_state(&placed, &states);
+        self.prev_bodies = prev.iter().map(moved).collect();
+        self.amp.fill(demo.amp_history_at(clip, t));
+        self.demo_start = true;
     }
 
     pub fn obs_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
@@ -244,7 +300,10 @@ impl TaskEnv {
             };
         }
         let bodies = self.world.body_states();
-        self.amp.push(amp_frame(&self.model, &bodies));
+        let dt = 1.0 / self.world.config.control_hz;
+        let moving = finite_difference_states(&self.prev_bodies, &bodies, dt);
+        self.amp.push(amp_frame(&self.model, &moving));
+        self.prev_bodies.clone_from(&bodies);
         let mut terms = RewardTerms {
             power: self.power(&bodies, &targets),
             ..RewardTerms::default()
@@ -364,6 +423,8 @@ impl TaskEnv {
             cycles: self.cycles.clone(),
             amp: self.amp.clone(),
             steps: self.steps,
+            prev_bodies: self.prev_bodies.clone(),
+            reached: self.reached,
         }
     }
 
@@ -372,5 +433,7 @@ impl TaskEnv {
         self.cycles = s.cycles.clone();
         self.amp = s.amp.clone();
         self.steps = s.steps;
+        self.prev_bodies = s.prev_bodies.clone();
+        self.reached = s.reached;
     }
 }

@@ -2,7 +2,9 @@
 //! snapshot/restore by cloning every piece of rapier state.
 
 use crate::character::{Character, ServoModel};
-use crate::mjcf::CharacterModel;
+use crate::mjcf::{CharacterModel, JointKind};
+use crate::motion::retarget::KinematicPose;
+use crate::obs::BodyState;
 use crate::room::{build_room, Room};
 use lhm_scenes::{Catalogue, Task};
 use rapier3d::prelude::*;
@@ -323,6 +325,88 @@ impl World {
         self.state = s.state.clone();
         self.control_steps = s.control_steps;
         self.physics_invalid = s.physics_invalid;
+    }
+}
+
+impl World {
+    /// Puts the character in `pose` (root pose and every joint's rotation relative to its
+    /// parent) moving as `states` say (world-frame velocities per body, model order): a
+    /// reference-state start. The multibody's joint coordinates and generalised velocities are
+    /// set, so stepping continues from exactly this state. Only for a freshly built world (joint
+    /// coordinates still 0); a joint rotation is projected onto the joint's degrees of freedom.
+    pub fn set_character_state(&mut self, pose: &KinematicPose, states: &[BodyState]) {
+        let model = &self.character.model;
+        let root = self.character.root();
+        let Some(any) = self.character.joints.iter().flatten().next().copied() else {
+            return;
+        };
+        let n = match self.state.multibody_joints.get(any) {
+            Some((mb, _)) => mb.ndofs(),
+            None => return,
+        };
+        // Generalised coordinates (as displacements from the all-zero spawn) and velocities.
+        let mut disp = vec![0.0f32; n];
+        let mut vel = vec![0.0f32; n];
+        if let Some(r) = states.first() {
+            vel[..3].copy_from_slice(&[r.linvel.x, r.linvel.y, r.linvel.z]);
+            vel[3..6].copy_from_slice(&[r.angvel.x, r.angvel.y, r.angvel.z]);
+        }
+        for (i, body) in model.bodies.iter().enumerate() {
+            let (Some(p), Some(h)) = (body.parent, self.character.joints[i]) else {
+                continue;
+            };
+            let Some(first) = self
+                .state
+                .multibody_joints
+                .get(h)
+                .and_then(|(mb, link)| mb.link(link).map(|l| l.assembly_id()))
+            else {
+                continue;
+            };
+            let (Some(parent), Some(child)) = (states.get(p), states.get(i)) else {
+                continue;
+            };
+            let relvel = parent.rot.inverse() * (child.angvel - parent.angvel);
+            let local = pose.local_rots[i];
+            match &body.joint {
+                JointKind::Hinge { dof } => {
+                    let axis = Vector::from_array(model.dofs[*dof].axis.map(|a| a as f32));
+                    disp[first] = crate::obs::twist_angle(local, axis);
+                    vel[first] = relvel.dot(axis);
+                }
+                JointKind::Ball { .. } => {
+                    let mut q = local.normalize();
+                    if q.w < 0.0 {
+                        q = -q;
+                    }
+                    let d = q.to_scaled_axis();
+                    disp[first..first + 3].copy_from_slice(&[d.x, d.y, d.z]);
+                    vel[first..first + 3].copy_from_slice(&[relvel.x, relvel.y, relvel.z]);
+                }
+                JointKind::Fixed | JointKind::Free => {}
+            }
+        }
+        if let Some(rb) = self.state.bodies.get_mut(root) {
+            rb.set_position(Pose::from_parts(pose.root_pos, pose.root_rot), true);
+        }
+        let s = &mut self.state;
+        if let Some((mb, _)) = s.multibody_joints.get_mut(any) {
+            mb.apply_displacements(&disp);
+            mb.generalized_velocity_mut().copy_from_slice(&vel);
+            mb.forward_kinematics(&s.bodies, true);
+            mb.update_rigid_bodies(&mut s.bodies, true);
+        }
+        // The rigid bodies' own velocities, for observations read before the first step (the
+        // step derives them from the generalised velocities again).
+        for (i, h) in self.character.bodies.iter().enumerate() {
+            if self.character.offsets[i] != Vector::ZERO {
+                continue;
+            }
+            if let (Some(rb), Some(st)) = (s.bodies.get_mut(*h), states.get(i)) {
+                rb.set_linvel(st.linvel, true);
+                rb.set_angvel(st.angvel, true);
+            }
+        }
     }
 }
 

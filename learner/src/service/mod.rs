@@ -57,6 +57,9 @@ pub struct TrainConfig {
     pub tasks: TaskSet,
     pub chunk_steps: u32,
     pub record_every_episodes: u32,
+    /// See `RunSpec::chunk_sets_per_version` (0: actors run free). `lhm train` sets it from
+    /// its actor and environment counts so that one version's sets make one batch.
+    pub chunk_sets_per_version: u32,
 }
 
 impl Default for TrainConfig {
@@ -99,11 +102,17 @@ impl Default for TrainConfig {
             ppo,
             amp_enabled: true,
             amp,
-            env: EnvConfig::default(),
+            env: EnvConfig {
+                // Reference-state initialisation for half the episodes (AMP/ASE/TokenHSI use
+                // such a hybrid of demo and default starts).
+                demo_start_probability: 0.5,
+                ..EnvConfig::default()
+            },
             sim: SimConfig::default(),
             tasks: TaskSet::TrainSingleObject,
             chunk_steps: 32,
             record_every_episodes: 20,
+            chunk_sets_per_version: 0,
         }
     }
 }
@@ -134,11 +143,20 @@ impl TrainConfig {
                 0
             },
             actor_critic: self.network.clone(),
-            env: self.env.clone(),
+            // Demo starts need the clips AMP uses: without AMP there are none to start from.
+            env: EnvConfig {
+                demo_start_probability: if self.amp_enabled {
+                    self.env.demo_start_probability
+                } else {
+                    0.0
+                },
+                ..self.env.clone()
+            },
             sim: self.sim.clone(),
             tasks: self.tasks.clone(),
             chunk_steps: self.chunk_steps,
             record_every_episodes: self.record_every_episodes,
+            chunk_sets_per_version: self.chunk_sets_per_version,
         }
     }
 

@@ -14,7 +14,7 @@ use super::retarget::{deepmimic_poses, forward_kinematics, omomo_poses, Kinemati
 use super::MotionError;
 use crate::env::EnvConfig;
 use crate::mjcf::{BodyDef, CharacterModel};
-use crate::obs::{amp_frame, amp_frame_dim, BodyState};
+use crate::obs::{amp_frame, amp_frame_dim, finite_difference_states, BodyState};
 use crate::world::SimConfig;
 use rapier3d::math::{Rotation, Vector};
 use std::path::{Path, PathBuf};
@@ -54,6 +54,8 @@ struct DemoClip {
     name: String,
     poses: Vec<KinematicPose>,
     frame_dt: f32,
+    /// The clip carries an object (OMOMO): a start from it needs the object placed too.
+    with_object: bool,
 }
 
 impl DemoClip {
@@ -139,6 +141,7 @@ impl DemoMotion {
                 name,
                 poses,
                 frame_dt,
+                with_object: false,
             };
             // A little slack so a clip exactly as long as the window is not lost to rounding.
             if clip.duration_s() < window.span_s() * (1.0 - 1e-5) {
@@ -180,7 +183,9 @@ impl DemoMotion {
             let frame_dt = uniform_frame_dt(&clip, &file)?;
             clips.push((name, deepmimic_poses(model, &clip), frame_dt));
         }
+        let mut omomo_count = 0;
         for (name, path) in installed(dir, Source::Omomo)? {
+            omomo_count += 1;
             let file = path.display().to_string();
             let bytes = std::fs::read(&path).map_err(|source| MotionError::Io {
                 file: file.clone(),
@@ -194,7 +199,12 @@ impl DemoMotion {
                 path: dir.display().to_string(),
             });
         }
-        Self::from_clips(model, clips, window)
+        let deepmimic = clips.len() - omomo_count;
+        let mut demo = Self::from_clips(model, clips, window)?;
+        for c in &mut demo.clips[deepmimic..] {
+            c.with_object = true;
+        }
+        Ok(demo)
     }
 
     pub fn window(&self) -> AmpWindow {
@@ -230,8 +240,10 @@ impl DemoMotion {
                     break;
                 }
             }
-            let slack = (self.clips[pick].duration_s() - self.window.span_s()).max(0.0);
-            let start = rng() as f32 * slack;
+            // The first frame's velocities look one control step back.
+            let dt = self.window.control_dt;
+            let slack = (self.clips[pick].duration_s() - self.window.span_s() - dt).max(0.0);
+            let start = dt + rng() as f32 * slack;
             self.push_window(pick, start, &mut out);
         }
         out
@@ -240,8 +252,77 @@ impl DemoMotion {
     fn push_window(&self, clip: usize, start: f32, out: &mut Vec<f32>) {
         for k in 0..self.window.frames {
             let t = start + k as f32 * self.window.control_dt;
-            out.extend(amp_frame(&self.model, &self.body_states_at(clip, t)));
+            out.extend(self.amp_frame_at(clip, t));
         }
+    }
+
+    /// The AMP frame at time `t` of `clip`, velocities as the environment takes them: backward
+    /// differences of poses over one control step ([`finite_difference_states`]).
+    pub fn amp_frame_at(&self, clip: usize, t: f32) -> Vec<f32> {
+        let c = &self.clips[clip];
+        let dt = self.window.control_dt;
+        let now = self.poses_at(c, t);
+        let prev = self.poses_at(c, t - dt);
+        amp_frame(&self.model, &finite_difference_states(&prev, &now, dt))
+    }
+
+    /// Body states (zero velocities) of `clip`'s pose at `t`, clamped to the clip.
+    fn poses_at(&self, c: &DemoClip, t: f32) -> Vec<BodyState> {
+        forward_kinematics(&self.model, &c.pose_at(t.clamp(0.0, c.duration_s())))
+            .into_iter()
+            .map(|(pos, rot)| BodyState {
+                pos,
+                rot,
+                linvel: Vector::ZERO,
+                angvel: Vector::ZERO,
+            })
+            .collect()
+    }
+
+    /// A reference-state start: a clip without an object, drawn with probability proportional to
+    /// its duration, and a time late enough for a full AMP window before it. `None` when every
+    /// clip carries an object. `rng` returns uniform numbers in [0, 1).
+    pub fn sample_start(&self, rng: &mut impl FnMut() -> f64) -> Option<(usize, f32)> {
+        let lead = self.window.span_s() + self.window.control_dt;
+        let usable: Vec<usize> = (0..self.clips.len())
+            .filter(|&i| !self.clips[i].with_object && self.clips[i].duration_s() > lead)
+            .collect();
+        let total: f64 = usable
+            .iter()
+            .map(|&i| f64::from(self.clips[i].duration_s() - lead))
+            .sum();
+        if usable.is_empty() || total <= 0.0 {
+            return None;
+        }
+        let mut target = rng() * total;
+        for &i in &usable {
+            let span = f64::from(self.clips[i].duration_s() - lead);
+            if target < span {
+                return Some((i, lead + target as f32));
+            }
+            target -= span;
+        }
+        usable.last().map(|&i| (i, self.clips[i].duration_s()))
+    }
+
+    /// The AMP frames of the window ending at `t` (oldest first): the history a start at `t`
+    /// has already seen.
+    pub fn amp_history_at(&self, clip: usize, t: f32) -> Vec<Vec<f32>> {
+        (0..self.window.frames)
+            .rev()
+            .map(|k| self.amp_frame_at(clip, t - k as f32 * self.window.control_dt))
+            .collect()
+    }
+
+    /// Body states at `t` with the previous control step's poses, for continuing backward
+    /// differences after a start: (states with central-difference velocities, poses one control
+    /// step earlier).
+    pub fn start_states(&self, clip: usize, t: f32) -> (Vec<BodyState>, Vec<BodyState>) {
+        let c = &self.clips[clip];
+        (
+            self.body_states_at(clip, t),
+            self.poses_at(c, t - self.window.control_dt),
+        )
     }
 
     /// Clip `clip`'s pose at time `t` seconds (clamped to the clip). Panics if `clip` is not an

@@ -1,0 +1,135 @@
+//! Reference-state initialisation and the one velocity definition of the AMP features, on a
+//! synthetic clip (no downloads): a start reproduces the clip's frame, and the environment's AMP
+//! frames of a replayed clip agree with the demo's.
+
+use lhm_scenes::Benchmark;
+use lhm_sim::env::{EnvConfig, TaskEnv};
+use lhm_sim::fidelity::joint_angles;
+use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
+use lhm_sim::obs::{amp_frame, finite_difference_states, BodyState};
+use lhm_sim::{CharacterModel, SimConfig};
+use rapier3d::math::{Rotation, Vector};
+
+/// 3 s at 30 fps: the root glides forward at 0.8 m/s while turning, the right knee and hip swing.
+fn synthetic_clip(model: &CharacterModel) -> Vec<KinematicPose> {
+    let knee = model.body_index("right_shin").unwrap();
+    let hip = model.body_index("right_thigh").unwrap();
+    (0..90)
+        .map(|i| {
+            let t = i as f32 / 30.0;
+            let mut local_rots = vec![Rotation::IDENTITY; model.bodies.len()];
+            local_rots[knee] = Rotation::from_rotation_y(0.6 + 0.4 * (3.0 * t).sin());
+            local_rots[hip] = Rotation::from_rotation_x(0.2 * t.sin())
+                * Rotation::from_rotation_y(-0.4 * (2.0 * t).sin());
+            KinematicPose {
+                root_pos: Vector::new(0.8 * t, 0.1, 0.95),
+                root_rot: Rotation::from_rotation_z(0.3 * t),
+                local_rots,
+            }
+        })
+        .collect()
+}
+
+fn setup() -> (CharacterModel, DemoMotion, TaskEnv) {
+    let model = CharacterModel::amp_humanoid();
+    let env_config = EnvConfig::default();
+    let sim = SimConfig::default();
+    let demo = DemoMotion::from_clips(
+        &model,
+        vec![("synthetic".into(), synthetic_clip(&model), 1.0 / 30.0)],
+        AmpWindow::of(&env_config, &sim),
+    )
+    .unwrap();
+    let bench = Benchmark::embedded().unwrap();
+    let (_, task) = bench.task("train-0001").unwrap();
+    let env = TaskEnv::new(&model, &task, &bench.catalogue, sim, env_config);
+    (model, demo, env)
+}
+
+#[test]
+fn a_demo_start_reproduces_the_clip_frame_pose_and_velocities() {
+    let (model, demo, mut env) = setup();
+    let t = 1.0;
+    env.start_from_demo(&demo, 0, t);
+    assert!(env.demo_start);
+    let world = env.world.body_states();
+    let (clip, _) = demo.start_states(0, t);
+    // Joint angles and root height as in the clip; root over the task's start.
+    let a = joint_angles(&model, &world);
+    let b = joint_angles(&model, &clip);
+    for (d, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert!((x - y).abs() < 1e-3, "{}: {x} vs {y}", model.dofs[d].name);
+    }
+    assert!((world[0].pos.z - clip[0].pos.z).abs() < 1e-4);
+    let start = &env.task.start;
+    let dx = world[0].pos.x - start.pos[0] as f32;
+    let dy = world[0].pos.y - start.pos[1] as f32;
+    assert!(
+        dx.hypot(dy) < 1e-4,
+        "root {:?} vs start {:?}",
+        world[0].pos,
+        start.pos
+    );
+    // Speeds are the clip's (turned with the heading, so compared as lengths).
+    for (w, c) in world.iter().zip(&clip) {
+        assert!((w.linvel.length() - c.linvel.length()).abs() < 1e-3);
+        assert!((w.angvel.length() - c.angvel.length()).abs() < 1e-3);
+    }
+    // The multibody itself moves that way (its generalised velocities, not only the rigid
+    // bodies' reported ones): with the servos off, one pipeline step later the knee has turned
+    // by about its clip velocity times the step.
+    for d in env.world.character.model.dofs.iter_mut() {
+        d.kp = 1e-9;
+        d.kd = 0.0;
+    }
+    let knee = model
+        .dofs
+        .iter()
+        .position(|d| d.name == "right_knee")
+        .unwrap();
+    let zero = vec![0.0; model.dofs.len()];
+    env.world.step_targets(&zero);
+    let dt = 1.0 / 30.0;
+    let moved = joint_angles(&model, &env.world.body_states())[knee] - a[knee];
+    let (later, _) = demo.start_states(0, t + dt);
+    let expected = joint_angles(&model, &later)[knee] - b[knee];
+    assert!(expected.abs() > 0.02, "the clip's knee moves: {expected}");
+    assert!(
+        (moved - expected).abs() < 0.35 * expected.abs(),
+        "knee moved {moved} rad in one control step, the clip {expected}"
+    );
+}
+
+#[test]
+fn replayed_clip_gives_the_demo_amp_frames() {
+    // The environment's AMP path (backward differences of poses one control step apart) on a
+    // kinematic replay equals DemoMotion's features frame for frame.
+    let (model, demo, _) = setup();
+    let dt = 1.0 / 30.0;
+    let states = |t: f32| -> Vec<BodyState> {
+        forward_kinematics(&model, &demo.pose_at(0, t))
+            .into_iter()
+            .map(|(pos, rot)| BodyState {
+                pos,
+                rot,
+                linvel: Vector::ZERO,
+                angvel: Vector::ZERO,
+            })
+            .collect()
+    };
+    for k in 2..80 {
+        let t = k as f32 * dt;
+        let env_frame = amp_frame(
+            &model,
+            &finite_difference_states(&states(t - dt), &states(t), dt),
+        );
+        let demo_frame = demo.amp_frame_at(0, t);
+        let worst = env_frame
+            .iter()
+            .zip(&demo_frame)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "frame {k}: max difference {worst}");
+    }
+}
