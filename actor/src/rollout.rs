@@ -48,6 +48,8 @@ struct Slot {
     obs: Vec<f32>,
     episode_return: f32,
     episode_len: u32,
+    /// Weighted task-reward terms summed over the episode.
+    episode_terms: std::collections::BTreeMap<String, f32>,
     buf: ChunkBuf,
 }
 
@@ -158,6 +160,7 @@ impl Rollout {
                 obs,
                 episode_return: 0.0,
                 episode_len: 0,
+                episode_terms: Default::default(),
                 buf: ChunkBuf::default(),
             });
         }
@@ -239,6 +242,9 @@ impl Rollout {
             self.env_steps += 1;
             slot.episode_len += 1;
             slot.episode_return += result.reward;
+            for (name, v) in result.terms.weighted(&slot.env.config.weights) {
+                *slot.episode_terms.entry(name.to_owned()).or_insert(0.0) += v;
+            }
             let buf = &mut slot.buf;
             buf.observations.extend_from_slice(&slot.obs);
             buf.actions.extend_from_slice(action);
@@ -276,6 +282,7 @@ impl Rollout {
                     task_id: slot.env.task.id.clone(),
                     reached: slot.env.reached,
                     demo_start: slot.env.demo_start,
+                    reward_terms: std::mem::take(&mut slot.episode_terms),
                 };
                 if result.truncated && !result.physics_invalid {
                     truncated_obs.push((i, slot.env.observation()));

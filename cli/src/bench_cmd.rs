@@ -38,6 +38,12 @@ enum BenchCommand {
         /// Pipeline steps per control step (default: the training setting, 2 x 1/60 s with 2 substeps).
         #[arg(long)]
         pipeline_steps: Option<usize>,
+        /// Servo model: implicit-spring (the training setting) or motor-constraint.
+        #[arg(long, default_value = "implicit-spring")]
+        servo: String,
+        /// rapier PGS iterations per substep (default: the training setting).
+        #[arg(long)]
+        solver_iterations: Option<usize>,
     },
     /// Physics fidelity in rapier: passive drop, 5 s neutral-pose hold, zero action, landing and a
     /// root-pinned knee step, each with fall step, root height and pelvis tilt at 0.5/1/2/5 s,
@@ -62,6 +68,22 @@ enum BenchCommand {
         /// Another MJCF character instead of the shipped AMP humanoid.
         #[arg(long, value_name = "XML")]
         character: Option<PathBuf>,
+    },
+    /// The training loop's samples/s (a real `lhm train`: learner plus one actor per core) against
+    /// the environment alone on all cores, in one run.
+    Train {
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+        /// Training iterations to run.
+        #[arg(long, default_value_t = 30)]
+        iterations: u64,
+        /// Iterations left out of the median (start-up).
+        #[arg(long, default_value_t = 5)]
+        warmup: u64,
+        /// Without AMP (no motion clips needed).
+        #[arg(long)]
+        no_amp: bool,
     },
     /// Learner update throughput: one PPO minibatch step (policy + value forward, loss, backward,
     /// Adam; 256-d observations, 28-d actions, minibatch 4096) and one AMP discriminator step,
@@ -100,6 +122,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
             threads,
             character,
             pipeline_steps,
+            servo,
+            solver_iterations,
         } => {
             let bench = Benchmark::embedded()?;
             let (_, task) = bench
@@ -111,9 +135,16 @@ pub fn run(args: BenchArgs) -> Result<()> {
             };
             let threads = threads
                 .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, usize::from));
-            let mut config = SimConfig::default();
+            let mut config = SimConfig {
+                servo: parse_servo(&servo)?,
+                ..SimConfig::default()
+            };
             if let Some(n) = pipeline_steps {
                 config.pipeline_steps_per_control = n.max(1);
+            }
+            if let Some(n) = solver_iterations {
+                anyhow::ensure!(n > 0, "--solver-iterations must be at least 1");
+                config.solver_iterations = n;
             }
             let r = run_env_bench(
                 &model,
@@ -160,13 +191,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
             };
             let defaults = SimConfig::default();
             let config = SimConfig {
-                servo: match servo.as_str() {
-                    "implicit-spring" => ServoModel::ImplicitSpring,
-                    "motor-constraint" => ServoModel::MotorConstraint,
-                    other => anyhow::bail!(
-                        "--servo {other:?}: expected implicit-spring or motor-constraint"
-                    ),
-                },
+                servo: parse_servo(&servo)?,
                 solver_iterations: solver_iterations.unwrap_or(defaults.solver_iterations),
                 pipeline_steps_per_control: pipeline_steps
                     .unwrap_or(defaults.pipeline_steps_per_control),
@@ -184,6 +209,29 @@ pub fn run(args: BenchArgs) -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&r)?);
             } else {
                 print_fidelity(&r);
+            }
+            Ok(())
+        }
+        BenchCommand::Train {
+            json,
+            iterations,
+            warmup,
+            no_amp,
+        } => {
+            let r = crate::train_bench::run(iterations, warmup, !no_amp)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&r)?);
+            } else {
+                println!(
+                    "training loop {:.0} samples/s vs environment alone {:.0} on all cores ({:.0}%); update {:.2} s; {:.1}% of chunks stale; median of iterations {}..{}",
+                    r.loop_samples_per_s,
+                    r.env_only_samples_per_s,
+                    100.0 * r.ratio,
+                    r.update_s,
+                    100.0 * r.stale_fraction,
+                    r.warmup + 1,
+                    r.iterations
+                );
             }
             Ok(())
         }
@@ -242,6 +290,14 @@ pub fn run(args: BenchArgs) -> Result<()> {
             }
             Ok(())
         }
+    }
+}
+
+fn parse_servo(name: &str) -> Result<ServoModel> {
+    match name {
+        "implicit-spring" => Ok(ServoModel::ImplicitSpring),
+        "motor-constraint" => Ok(ServoModel::MotorConstraint),
+        other => anyhow::bail!("--servo {other:?}: expected implicit-spring or motor-constraint"),
     }
 }
 

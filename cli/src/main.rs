@@ -10,6 +10,7 @@ mod plot_cmd;
 mod record_cmd;
 mod render_cmd;
 mod scenes_cmd;
+mod train_bench;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;

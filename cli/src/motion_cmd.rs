@@ -28,6 +28,20 @@ enum MotionCommand {
     /// its middle frame, or of the frame at --at), so the retargeting can be judged by eye. OMOMO
     /// clips show their box too.
     Render(RenderArgs),
+    /// Check every installed clip against the environment: start an episode from frames of the
+    /// clip (reference-state initialisation) and compare the AMP frame the environment records
+    /// with the demo's, feature by feature, in units of the demo's std. Fails above --tolerance.
+    Check {
+        /// Clip cache (default: $LHM_MOTION_DIR, else ~/.cache/lhm/motions).
+        #[arg(long)]
+        dir: Option<PathBuf>,
+        /// Frames checked per clip (evenly spread).
+        #[arg(long, default_value_t = 20)]
+        frames: usize,
+        /// Largest allowed difference on any feature, in demo standard deviations.
+        #[arg(long, default_value_t = 0.05)]
+        tolerance: f32,
+    },
 }
 
 #[derive(Args)]
@@ -75,7 +89,75 @@ pub fn run(args: MotionArgs) -> Result<()> {
             Ok(())
         }
         MotionCommand::Render(args) => render(&args),
+        MotionCommand::Check {
+            dir,
+            frames,
+            tolerance,
+        } => check(&dir.unwrap_or_else(default_dir), frames.max(1), tolerance),
     }
+}
+
+/// See [`MotionCommand::Check`].
+fn check(dir: &Path, frames: usize, tolerance: f32) -> Result<()> {
+    use lhm_sim::env::{EnvConfig, TaskEnv};
+    use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+    let model = CharacterModel::amp_humanoid();
+    let (env_config, sim) = (EnvConfig::default(), SimConfig::default());
+    let demo = DemoMotion::load_dir(&model, dir, AmpWindow::of(&env_config, &sim))?;
+    let bench = lhm_scenes::Benchmark::embedded()?;
+    let (_, task) = bench.task("train-0001").context("no task train-0001")?;
+    // Per-feature std of the demo, from windows sampled across every clip.
+    let mut state = 1u64;
+    let mut rng = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let dim = lhm_sim::obs::amp_frame_dim(&model);
+    let rows = demo.sample_features(2000, &mut rng);
+    let n = rows.len() / dim;
+    let mut std = vec![0f32; dim];
+    for (k, s) in std.iter_mut().enumerate() {
+        let col: Vec<f32> = (0..n).map(|r| rows[r * dim + k]).collect();
+        let mean = col.iter().sum::<f32>() / n as f32;
+        let var = col.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / n as f32;
+        *s = var.sqrt().max(1e-3);
+    }
+    let lead = demo.window().span_s() + demo.window().control_dt;
+    let mut worst_all = 0f32;
+    for (clip, (name, duration)) in demo.clips().enumerate() {
+        let mut worst = (0f32, 0usize);
+        for i in 0..frames {
+            let t = lead + (duration - lead) * (i as f32 + 0.5) / frames as f32;
+            let mut env = TaskEnv::new(
+                &model,
+                &task,
+                &bench.catalogue,
+                sim.clone(),
+                env_config.clone(),
+            );
+            env.start_from_demo(&demo, clip, t);
+            let got = env.current_amp_frame();
+            let want = demo.amp_frame_at(clip, t);
+            for (k, (a, b)) in got.iter().zip(&want).enumerate() {
+                let d = (a - b).abs() / std[k];
+                if d > worst.0 {
+                    worst = (d, k);
+                }
+            }
+        }
+        println!(
+            "{name:<22} worst feature difference {:.4} std (feature {})",
+            worst.0, worst.1
+        );
+        worst_all = worst_all.max(worst.0);
+    }
+    if worst_all > tolerance {
+        bail!("a clip's AMP features differ from the environment's by {worst_all:.3} std (tolerance {tolerance})");
+    }
+    println!("all clips within {tolerance} std");
+    Ok(())
 }
 
 /// A clip ready to play: the character's poses `frame_dt` apart, and for OMOMO its box.

@@ -117,6 +117,7 @@ pub fn run(args: RecordArgs) -> Result<()> {
         task_id: task.id.clone(),
         reached: env.reached,
         demo_start: false,
+        reward_terms: Default::default(),
     };
     let frames = capture.finish(stats.clone());
     record_episode(

@@ -1,19 +1,24 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use indicatif::ProgressBar;
+use lhm_learner::service::TrainConfig;
+use lhm_learner::Learner;
 use lhm_scenes::raster::Canvas;
 use lhm_scenes::rng::SplitMix64;
 use lhm_scenes::Benchmark;
+use lhm_sim::env::TaskEnv;
 use lhm_sim::render::{render, write_gif, Camera};
-use lhm_sim::{CharacterModel, SimConfig, World};
+use lhm_sim::CharacterModel;
 use std::path::PathBuf;
 
-#[derive(Clone, Copy, ValueEnum)]
+/// What acts: a built-in policy or a trained checkpoint.
 enum Policy {
     /// All actions 0: the servos hold the neutral pose.
     Zero,
     /// Uniform random actions in [-1, 1].
     Random,
+    /// A learner checkpoint's policy (its mean action, or samples with --stochastic).
+    Trained(Box<Learner>),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -26,21 +31,37 @@ enum View {
 
 #[derive(Args)]
 pub struct RenderRolloutArgs {
+    /// Benchmark task id (e.g. unseen-0003, or train-0002.p1 for its first pair alone).
     task: String,
-    #[arg(long, value_enum, default_value = "zero")]
-    policy: Policy,
+    /// `zero` (the neutral pose), `random` (uniform actions in [-1, 1]) or a learner checkpoint
+    /// (`runs/<run>/checkpoint`, with or without .json / .safetensors).
+    #[arg(long, default_value = "zero")]
+    policy: String,
+    /// The run's training config, if it changed the environment settings (checkpoints only).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Sample the trained policy's actions instead of taking its mean.
+    #[arg(long)]
+    stochastic: bool,
+    /// Keep rendering after the episode ends (a fall or the last handoff), as the physics goes on.
+    #[arg(long)]
+    past_end: bool,
     /// An animated .gif, or a .png still of the last frame.
     #[arg(short, long, value_name = "GIF|PNG")]
     output: PathBuf,
+    /// Camera: third person or the character's eyes.
     #[arg(long, value_enum, default_value = "third")]
     view: View,
-    /// Length of the rollout.
+    /// Length of the rollout, seconds.
     #[arg(long, default_value_t = 4.0)]
     seconds: f32,
+    /// Frame width in pixels.
     #[arg(long, default_value_t = 320)]
     width: u32,
+    /// Frame height in pixels.
     #[arg(long, default_value_t = 240)]
     height: u32,
+    /// Seed of the random and stochastic policies.
     #[arg(long, default_value_t = 0)]
     seed: u64,
 }
@@ -56,30 +77,91 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         .task(&a.task)
         .with_context(|| format!("no task {:?}", a.task))?;
     let model = CharacterModel::amp_humanoid();
-    let config = SimConfig::default();
-    let mut world = World::with_task(&model, config.clone(), &task, &bench.catalogue);
+    let train = match &a.config {
+        Some(path) => TrainConfig::from_toml_file(path)?,
+        None => TrainConfig::default(),
+    };
+    let policy = match a.policy.as_str() {
+        "zero" => Policy::Zero,
+        "random" => Policy::Random,
+        path => {
+            let path = PathBuf::from(path);
+            let stem = match path.extension().and_then(|e| e.to_str()) {
+                Some("json" | "safetensors") => path.with_extension(""),
+                _ => path,
+            };
+            let learner = Learner::load(&stem, None)
+                .with_context(|| format!("loading the policy {}", stem.display()))?;
+            let (obs, act) = (
+                learner.actor_critic.obs_dim(),
+                learner.actor_critic.act_dim(),
+            );
+            let want = TaskEnv::obs_dim(&model, &train.env);
+            if obs != want || act != model.dofs.len() {
+                bail!(
+                    "{} takes {obs} observations and gives {act} actions; this environment has \
+                     {want} and {} (pass the run's --config)",
+                    stem.display(),
+                    model.dofs.len()
+                );
+            }
+            Policy::Trained(Box::new(learner))
+        }
+    };
+    let mut env = TaskEnv::new(
+        &model,
+        &task,
+        &bench.catalogue,
+        train.sim.clone(),
+        train.env.clone(),
+    );
     let mut rng = SplitMix64::new(a.seed);
-    let steps = (a.seconds * config.control_hz).round() as usize;
+    let mut net_rng = lhm_nets::SplitMix64::new(a.seed);
+    let steps = (a.seconds * train.sim.control_hz).round() as usize;
     // Every other control step: a 15 fps GIF.
     let bar = ProgressBar::new(steps as u64);
     let mut frames = Vec::new();
+    let mut ended = false;
     for step in 0..steps {
-        let action: Vec<f32> = match a.policy {
+        let action: Vec<f32> = match &policy {
             Policy::Zero => vec![0.0; model.dofs.len()],
             Policy::Random => (0..model.dofs.len())
                 .map(|_| rng.range(-1.0, 1.0) as f32)
                 .collect(),
+            Policy::Trained(l) => {
+                let obs = env.observation();
+                if a.stochastic {
+                    l.actor_critic.act(&obs, &mut net_rng)?.actions
+                } else {
+                    l.actor_critic.act_deterministic(&obs)?
+                }
+            }
         };
         if step % 2 == 0 {
             let camera = match a.view {
-                View::Third => Camera::third_person(&world, a.width, a.height),
-                View::Ego => Camera::egocentric(&world, a.width, a.height),
+                View::Third => Camera::third_person(&env.world, a.width, a.height),
+                View::Ego => Camera::egocentric(&env.world, a.width, a.height),
             };
-            frames.push(render(&world, &camera, matches!(a.view, View::Third)));
+            frames.push(render(&env.world, &camera, matches!(a.view, View::Third)));
         }
-        if !world.step(&action) {
+        let r = env.step(&action);
+        if r.physics_invalid {
             tracing::warn!("physics guard tripped at step {step}; stopping the rollout");
             break;
+        }
+        if (r.done || r.truncated) && !ended {
+            ended = true;
+            println!(
+                "episode ended at step {} ({:.2} s): fell {}, reached the object {}, pairs succeeded {}",
+                step + 1,
+                (step + 1) as f32 / train.sim.control_hz,
+                r.fell,
+                env.reached,
+                env.cycles.results.iter().filter(|c| c.success).count()
+            );
+            if !a.past_end {
+                break;
+            }
         }
         bar.inc(1);
     }

@@ -179,6 +179,24 @@ impl Learner {
         Ok(())
     }
 
+    /// Writes the policy alone (actor-critic, its normaliser and optimiser state; no
+    /// discriminator, no replay buffer) to `<stem>.{safetensors,json}`: a few MB that actors,
+    /// `lhm record` and `lhm render-rollout` load with [`Self::load`], and that can be committed.
+    /// Training resumes from the full checkpoint, not from this.
+    pub fn save_policy(&self, stem: &Path) -> LearnerResult<()> {
+        let ac_vars = self.actor_critic.named_vars();
+        let mut tensors: Vec<(String, Tensor)> = ac_vars
+            .iter()
+            .map(|(n, v)| (n.clone(), v.as_tensor().clone()))
+            .collect();
+        tensors.extend(moment_tensors("optim.ppo", &ac_vars, &self.ppo.adam)?);
+        let mut meta = self.meta();
+        meta.config.amp = None;
+        meta.amp = None;
+        checkpoint::save(stem, CHECKPOINT_KIND, &tensors, &meta)?;
+        Ok(())
+    }
+
     /// Rebuilds the learner stored at `stem`. With `expected`, the stored configuration must equal
     /// it (a run resumed with different settings is refused rather than silently changed).
     pub fn load(stem: &Path, expected: Option<&LearnerConfig>) -> LearnerResult<Self> {

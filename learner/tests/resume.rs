@@ -187,3 +187,32 @@ fn mismatched_or_corrupt_learner_checkpoints_are_refused_with_typed_errors() {
     println!("corrupt checkpoint error: {err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_policy_alone_loads_and_acts_as_the_full_learner_without_its_amp_state() {
+    let mut learner = Learner::new(config()).unwrap();
+    for it in 0..3 {
+        train_step(&mut learner, it);
+    }
+    let dir = scratch("policy-only");
+    learner.save(&dir.join("checkpoint")).unwrap();
+    learner.save_policy(&dir.join("policy")).unwrap();
+    let policy = Learner::load(&dir.join("policy"), None).unwrap();
+    assert!(policy.amp.is_none(), "no discriminator in the policy file");
+    assert!(policy.config.amp.is_none());
+    let obs: Vec<f32> = (0..4 * OBS).map(|i| (i as f32 * 0.37).sin()).collect();
+    assert_eq!(
+        policy.actor_critic.act_deterministic(&obs).unwrap(),
+        learner.actor_critic.act_deterministic(&obs).unwrap()
+    );
+    let size = |stem: &str| {
+        std::fs::metadata(dir.join(format!("{stem}.safetensors")))
+            .unwrap()
+            .len()
+    };
+    assert!(
+        size("policy") < size("checkpoint"),
+        "the replay buffer and disc stay out"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -173,7 +173,15 @@ fn episode_stats(c: &Check, i: usize, e: &EpisodeStats) -> Result {
     // One placement error per attempted cycle.
     let errors = &e.final_placement_error_m;
     c.len("episodes.final_placement_error_m", errors.len(), attempted)?;
-    c.finite_non_negative("episodes.final_placement_error_m", errors)
+    c.finite_non_negative("episodes.final_placement_error_m", errors)?;
+    for (name, v) in &e.reward_terms {
+        c.ensure(
+            v.is_finite(),
+            "episodes.reward_terms",
+            format_args!("episode {i}: term {name:?} = {v} is not finite"),
+        )?;
+    }
+    Ok(())
 }
 
 /// Checks a normaliser if present (absent means identity).

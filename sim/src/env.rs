@@ -75,6 +75,23 @@ impl Default for EnvConfig {
     }
 }
 
+impl RewardTerms {
+    /// Each term times its weight, by name (their sum is the step's task reward).
+    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 9] {
+        [
+            ("locomotion", w.locomotion * self.locomotion),
+            ("facing", w.facing * self.facing),
+            ("hands", w.hands * self.hands),
+            ("lift", w.lift * self.lift),
+            ("carry", w.carry * self.carry),
+            ("place", w.place * self.place),
+            ("power", w.power * self.power),
+            ("release_retreat", w.release_retreat * self.release_retreat),
+            ("success", w.success * self.success),
+        ]
+    }
+}
+
 /// Each task reward term of a step, before weighting (for logging).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RewardTerms {
@@ -277,6 +294,17 @@ impl TaskEnv {
             self.config.map_cell,
         ));
         obs
+    }
+
+    /// The AMP frame the environment would record for its current state (velocities as backward
+    /// differences from the previous control step's poses).
+    pub fn current_amp_frame(&self) -> Vec<f32> {
+        let dt = 1.0 / self.world.config.control_hz;
+        let now = self.world.body_states();
+        amp_frame(
+            &self.model,
+            &finite_difference_states(&self.prev_bodies, &now, dt),
+        )
     }
 
     /// The discriminator's input for the latest step.

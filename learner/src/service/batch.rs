@@ -25,6 +25,8 @@ pub struct EpisodeSummary {
     pub task_start_reached: u64,
     pub mean_task_reward: f64,
     pub mean_style_reward: f64,
+    /// Per task-reward term, its weighted mean per step over the finished episodes.
+    pub reward_terms: std::collections::BTreeMap<String, f64>,
 }
 
 impl EpisodeSummary {
@@ -56,6 +58,7 @@ pub fn assemble(
     let mut summary = EpisodeSummary::default();
     let (mut attempted, mut succeeded) = (0u64, 0u64);
     let (mut task_sum, mut style_sum, mut steps) = (0f64, 0f64, 0u64);
+    let mut episode_steps = 0u64;
     for c in chunks {
         let rewards = match amp {
             Some(amp) if c.amp_dim > 0 => {
@@ -95,10 +98,19 @@ pub fn assemble(
             succeeded += u64::from(e.cycles_succeeded);
             summary.falls += u64::from(e.fell);
             summary.reached += u64::from(e.reached);
+            episode_steps += u64::from(e.length);
+            for (name, v) in &e.reward_terms {
+                *summary.reward_terms.entry(name.clone()).or_insert(0.0) += f64::from(*v);
+            }
             if !e.demo_start {
                 summary.task_start_episodes += 1;
                 summary.task_start_reached += u64::from(e.reached);
             }
+        }
+    }
+    if episode_steps > 0 {
+        for v in summary.reward_terms.values_mut() {
+            *v /= episode_steps as f64;
         }
     }
     if summary.episodes > 0 {

@@ -27,6 +27,15 @@ pub const COLUMNS: &[&str] = &[
     "clip_fraction",
     "stale_chunks",
     "accepted_chunks",
+    "reward_locomotion",
+    "reward_facing",
+    "reward_hands",
+    "reward_lift",
+    "reward_carry",
+    "reward_place",
+    "reward_power",
+    "reward_release_retreat",
+    "reward_success",
 ];
 
 pub struct MetricsCsv {

@@ -654,6 +654,7 @@ pub fn run_learner(
         let it = learner.counters.iteration;
         if config.checkpoint_every > 0 && it % config.checkpoint_every == 0 {
             learner.save(&stem)?;
+            learner.save_policy(&run_dir.join("policy"))?;
         }
         let update_s = update_started.elapsed().as_secs_f64();
         let total_s = collect_s + update_s;
@@ -674,7 +675,12 @@ pub fn run_learner(
             reach_rate: s.reach_rate(),
         };
         if let Some(csv) = metrics_csv.as_mut() {
-            let row = [
+            let terms: Vec<(String, f64)> = s
+                .reward_terms
+                .iter()
+                .map(|(k, v)| (format!("reward_{k}"), *v))
+                .collect();
+            let mut row = vec![
                 ("iteration", it as f64),
                 ("samples", learner.counters.samples as f64),
                 ("wall_s", run_started.elapsed().as_secs_f64()),
@@ -696,6 +702,7 @@ pub fn run_learner(
                 ("stale_chunks", book.counters.stale as f64),
                 ("accepted_chunks", book.counters.accepted as f64),
             ];
+            row.extend(terms.iter().map(|(k, v)| (k.as_str(), *v)));
             if let Err(e) = csv.append(&row) {
                 tracing::warn!("writing {}: {e}; metrics.csv stops", csv.path().display());
                 metrics_csv = None;
@@ -716,6 +723,9 @@ pub fn run_learner(
         v.insert("success_rate".into(), s.success_rate);
         v.insert("falls".into(), s.falls as f64);
         v.insert("fall_fraction".into(), report.fall_fraction);
+        for (name, mean) in &s.reward_terms {
+            v.insert(format!("reward/{name}"), *mean);
+        }
         v.insert("reach_rate".into(), report.reach_rate);
         v.insert("mean_task_reward".into(), s.mean_task_reward);
         v.insert("mean_style_reward".into(), s.mean_style_reward);
@@ -747,6 +757,7 @@ pub fn run_learner(
         iteration_started = Instant::now();
     }
     learner.save(&stem)?;
+    learner.save_policy(&run_dir.join("policy"))?;
     tracing::info!(
         "learner stopped at iteration {}; checkpoint {}",
         learner.counters.iteration,

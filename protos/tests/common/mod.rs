@@ -90,6 +90,14 @@ pub fn sample_chunk() -> TrajectoryChunk {
             fell: false,
             physics_invalid: false,
             task_id: "shelf-pick-07".into(),
+            reached: true,
+            demo_start: false,
+            reward_terms: [
+                ("locomotion".to_string(), 12.5),
+                ("power".to_string(), -3.25),
+            ]
+            .into_iter()
+            .collect(),
         }],
         ..TrajectoryChunk::versioned()
     }
@@ -248,6 +256,9 @@ pub fn sample_episode_frames() -> EpisodeFrames {
             fell: false,
             physics_invalid: false,
             task_id: "train-0001".into(),
+            reached: false,
+            demo_start: true,
+            reward_terms: Default::default(),
         }),
         ..EpisodeFrames::versioned()
     }
