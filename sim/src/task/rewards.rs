@@ -178,7 +178,10 @@ impl Default for RewardWeights {
             lift: 0.1,
             carry: 0.2,
             place: 0.3,
-            power: 2e-5,
+            // 2e-5 made the power term -0.26 per step while the early policy flails and falls: the
+            // step reward went negative once the discriminator won, so falling sooner paid
+            // (docs/runs/t1-power). IsaacGymEnvs' HumanoidAMP has no power term at all.
+            power: 1e-6,
             release_retreat: 0.0,
             facing: 0.1,
             success: 20.0,
