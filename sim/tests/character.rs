@@ -27,10 +27,22 @@ fn all_poses(w: &World) -> Vec<[u32; 7]> {
 }
 
 #[test]
-fn zero_action_stands_for_a_moment_then_falls_without_flying() {
+fn a_mid_range_crouch_holds_for_a_moment_then_falls_without_flying() {
     let model = CharacterModel::amp_humanoid();
     let mut w = World::new(&model, SimConfig::default());
-    let zero = vec![0.0; model.dofs.len()];
+    // Knees and elbows to mid-range (80°), everything else neutral: the zero action of the
+    // earlier action mapping (zero action now stands; test `zero_action_is_the_neutral_pose...`).
+    let zero: Vec<f32> = model
+        .dofs
+        .iter()
+        .map(|d| {
+            if d.name.ends_with("knee") || d.name.ends_with("elbow") {
+                0.5
+            } else {
+                0.0
+            }
+        })
+        .collect();
     let spawn = w.root_height();
     let (mut max_root, mut max_speed): (f32, f32) = (0.0, 0.0);
     let mut heights = Vec::new();
@@ -47,13 +59,14 @@ fn zero_action_stands_for_a_moment_then_falls_without_flying() {
         }
         heights.push(w.root_height());
     }
-    // A moment after spawn it is still upright; zero action bends the knees to mid-range, so it
-    // sinks into a crouch it holds for a while (measured: 0.71 m at 0.5 s) ...
+    // A moment after spawn it is still upright; the knees bend to mid-range, so it sinks into a
+    // crouch it holds for a while ...
     assert!(heights[2] > 0.8, "root at 0.1 s: {}", heights[2]);
+    // (measured: 0.71 m at 0.33 s, 0.64 m at 0.53 s, then tipping over)
     assert!(
-        heights[10..20].iter().all(|h| *h > 0.6),
+        heights[10..16].iter().all(|h| *h > 0.6),
         "crouch held: {:?}",
-        &heights[10..20]
+        &heights[10..16]
     );
     // ... it never rises above where it started or moves absurdly fast ...
     assert!(

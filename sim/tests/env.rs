@@ -18,7 +18,18 @@ fn setup(config: EnvConfig) -> (CharacterModel, TaskEnv) {
 fn observations_have_their_dimensions_and_a_fall_is_terminal() {
     let config = EnvConfig::default();
     let (model, mut env) = setup(config.clone());
-    let zero = vec![0.0; model.dofs.len()];
+    // Knees and elbows at mid-range: a crouch that tips over (zero action would stand).
+    let zero: Vec<f32> = model
+        .dofs
+        .iter()
+        .map(|d| {
+            if d.name.ends_with("knee") || d.name.ends_with("elbow") {
+                0.5
+            } else {
+                0.0
+            }
+        })
+        .collect();
     assert_eq!(env.observation().len(), TaskEnv::obs_dim(&model, &config));
     assert_eq!(env.amp_features().len(), TaskEnv::amp_dim(&model, &config));
     let mut ended = None;
@@ -37,7 +48,7 @@ fn observations_have_their_dimensions_and_a_fall_is_terminal() {
             break;
         }
     }
-    let (step, r) = ended.expect("zero action falls within 10 s");
+    let (step, r) = ended.expect("the crouch falls within 10 s");
     assert!(r.fell && !r.truncated && !r.physics_invalid, "{r:?}");
     assert!(step > 10, "fell at step {step}");
 }

@@ -256,8 +256,10 @@ pub fn sample_episode_frames() -> EpisodeFrames {
             fell: false,
             physics_invalid: false,
             task_id: "train-0001".into(),
+            // The new fields are exercised by the chunk sample; here they keep their defaults, so
+            // the bit-flip rejection threshold below stays measured on the same bytes.
             reached: false,
-            demo_start: true,
+            demo_start: false,
             reward_terms: Default::default(),
         }),
         ..EpisodeFrames::versioned()

@@ -548,8 +548,10 @@ mod tests {
         assert!(
             (twist_angle(demo.pose_at(0, 1.5 * DT).local_rots[shin], axis) - 0.45).abs() < 1e-5
         );
-        // Slack is 3 frames - 1 frame: 0.75 of it starts the window halfway between frames 1, 2.
-        let row = demo.sample_features(1, &mut replay(vec![0.0, 0.75]));
+        // Windows start one control step in (their first frame's velocity looks back one step);
+        // the slack is 3 frames - 1 frame (span) - 1 frame: half of it starts the window halfway
+        // between frames 1 and 2.
+        let row = demo.sample_features(1, &mut replay(vec![0.0, 0.5]));
         let (rot, vel_start) = joint_offsets(&m);
         let at = rot[shin].expect("the knee is in the layout");
         let dim = amp_frame_dim(&m);
@@ -624,7 +626,7 @@ mod tests {
         let row = demo.sample_features(1, &mut replay(vec![0.5, u]));
         assert_eq!(row.len(), demo.feature_dim());
         assert_eq!(demo.feature_dim(), 5 * amp_frame_dim(&m));
-        let start = u as f32 * (11.0 * DT - w.span_s());
+        let start = DT + u as f32 * (11.0 * DT - w.span_s() - DT);
         let expected: Vec<f32> = (0..5)
             .flat_map(|k| amp_frame(&m, &exact(start + k as f32 * DT)))
             .collect();
@@ -670,7 +672,7 @@ mod tests {
         let e = DemoMotion::from_clips(
             &m,
             vec![("hop".into(), vec![pose.clone(); 3], DT)],
-            AmpWindow::default(),
+            window(10),
         )
         .expect_err("2 frames cannot hold a 10-frame window")
         .to_string();
@@ -727,7 +729,7 @@ mod tests {
         let demo = demo.expect("loads");
         assert_eq!(demo.clips().map(|(n, _)| n).collect::<Vec<_>>(), ["walk"]);
         let row = demo.sample_features(1, &mut replay(vec![0.5]));
-        assert_eq!(row.len(), 10 * amp_frame_dim(&m));
+        assert_eq!(row.len(), AmpWindow::default().frames * amp_frame_dim(&m));
         // DeepMimic x is ours: 1.5 m/s forward, facing +x.
         assert!(
             (row[7] - 1.5).abs() < 1e-3 && (row[0] - 0.85).abs() < 1e-5,
