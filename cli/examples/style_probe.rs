@@ -27,13 +27,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &lhm_sim::motion::default_dir(),
         AmpWindow::of(&config.env, &config.sim),
     )?;
-    let mut k = 7u64;
-    let mut rng = || {
-        k = k
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (k >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut split = SplitMix64::new(7);
+    let mut rng = || split.next_f64();
     let rows = demo.sample_features(512, &mut rng);
     println!(
         "demo windows: style {:.3}",

@@ -107,13 +107,8 @@ fn check(dir: &Path, frames: usize, tolerance: f32) -> Result<()> {
     let bench = lhm_scenes::Benchmark::embedded()?;
     let (_, task) = bench.task("train-0001").context("no task train-0001")?;
     // Per-feature std of the demo, from windows sampled across every clip.
-    let mut state = 1u64;
-    let mut rng = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut split = lhm_nets::SplitMix64::new(1);
+    let mut rng = || split.next_f64();
     let dim = lhm_sim::obs::amp_frame_dim(&model);
     let rows = demo.sample_features(2000, &mut rng);
     let n = rows.len() / dim;

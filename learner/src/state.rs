@@ -128,15 +128,21 @@ impl Learner {
         })
     }
 
-    /// Every tensor of the state under its checkpoint name: `policy.*`, `value.*`, `disc.*`,
-    /// `optim.ppo.{m,v}.<param>`, `optim.amp.{m,v}.<param>`, `amp.replay.features`.
-    pub fn named_tensors(&self) -> LearnerResult<Vec<(String, Tensor)>> {
+    /// The actor-critic's parameters and their Adam moments, under their checkpoint names.
+    fn policy_tensors(&self) -> LearnerResult<Vec<(String, Tensor)>> {
         let ac_vars = self.actor_critic.named_vars();
         let mut tensors: Vec<(String, Tensor)> = ac_vars
             .iter()
             .map(|(n, v)| (n.clone(), v.as_tensor().clone()))
             .collect();
         tensors.extend(moment_tensors("optim.ppo", &ac_vars, &self.ppo.adam)?);
+        Ok(tensors)
+    }
+
+    /// Every tensor of the state under its checkpoint name: `policy.*`, `value.*`, `disc.*`,
+    /// `optim.ppo.{m,v}.<param>`, `optim.amp.{m,v}.<param>`, `amp.replay.features`.
+    pub fn named_tensors(&self) -> LearnerResult<Vec<(String, Tensor)>> {
+        let mut tensors = self.policy_tensors()?;
         if let Some(amp) = &self.amp {
             let disc_vars = amp.disc.named_vars("disc");
             tensors.extend(
@@ -184,12 +190,7 @@ impl Learner {
     /// `lhm record` and `lhm render-rollout` load with [`Self::load`], and that can be committed.
     /// Training resumes from the full checkpoint, not from this.
     pub fn save_policy(&self, stem: &Path) -> LearnerResult<()> {
-        let ac_vars = self.actor_critic.named_vars();
-        let mut tensors: Vec<(String, Tensor)> = ac_vars
-            .iter()
-            .map(|(n, v)| (n.clone(), v.as_tensor().clone()))
-            .collect();
-        tensors.extend(moment_tensors("optim.ppo", &ac_vars, &self.ppo.adam)?);
+        let tensors = self.policy_tensors()?;
         let mut meta = self.meta();
         meta.config.amp = None;
         meta.amp = None;
