@@ -37,7 +37,8 @@ pub struct RecordArgs {
     output: PathBuf,
 }
 
-fn checkpoint_stem(path: &Path) -> PathBuf {
+/// A learner checkpoint's stem, given with or without its `.json` / `.safetensors` extension.
+pub(crate) fn checkpoint_stem(path: &Path) -> PathBuf {
     match path.extension().and_then(|e| e.to_str()) {
         Some("json" | "safetensors") => path.with_extension(""),
         _ => path.to_owned(),

@@ -85,11 +85,7 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         "zero" => Policy::Zero,
         "random" => Policy::Random,
         path => {
-            let path = PathBuf::from(path);
-            let stem = match path.extension().and_then(|e| e.to_str()) {
-                Some("json" | "safetensors") => path.with_extension(""),
-                _ => path,
-            };
+            let stem = crate::record_cmd::checkpoint_stem(std::path::Path::new(path));
             let learner = Learner::load(&stem, None)
                 .with_context(|| format!("loading the policy {}", stem.display()))?;
             let (obs, act) = (
