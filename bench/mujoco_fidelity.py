@@ -9,6 +9,7 @@ Scenarios, each from the model's default pose (pelvis at 0.89 m, joints 0) at re
   zero_action   targets from the policy action mapping with action 0; must equal neutral_hold.
   landing       neutral_hold spawned 0.10 m higher, 2 s: impact and settling forces.
   servo_step    root welded in place, right knee target stepped to 70 deg: PD servo response.
+  collapse      servos off for 3 s, on through the fall: how far joints go past their ranges.
 Per scenario: fall step, pelvis height and tilt, joint tracking error, foot slide, floor penetration,
 floor normal forces against body weight, wall time (includes the measuring, an mj_forward per step).
 
@@ -222,6 +223,36 @@ def servo_step():
     return {"wall_s": round(time.perf_counter() - start, 4), "knee_error_deg": errors}
 
 
+COLLAPSE_S = 3.0
+
+
+def collapse():
+    """Servos off for COLLAPSE_S seconds, on through the fall; per actuated joint, the largest
+    amount (degrees) its angle lay outside its range at the end of a control step."""
+    model = passive_model()
+    data = mujoco.MjData(model)
+    per_control = round(1.0 / (CONTROL_HZ * model.opt.timestep))
+    joints = [model.actuator_trnid[a, 0] for a in range(model.nu)]
+    names = [name_of(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
+    worst = np.zeros(len(joints))
+    per_step_worst = []
+    start = time.perf_counter()
+    for _ in range(round(COLLAPSE_S * CONTROL_HZ)):
+        for _ in range(per_control):
+            mujoco.mj_step(model, data)
+        q = data.qpos[[model.jnt_qposadr[j] for j in joints]]
+        lo, hi = model.jnt_range[joints, 0], model.jnt_range[joints, 1]
+        excess = np.maximum(np.maximum(lo - q, q - hi), 0.0)
+        per_step_worst.append(excess.max())
+        worst = np.maximum(worst, excess)
+    return {
+        "mean_limit_excess_deg": rnd(math.degrees(statistics.fmean(per_step_worst)), 3),
+        "max_limit_excess_deg": rnd(math.degrees(worst.max()), 3),
+        "limit_excess_deg_by_joint": {n: rnd(math.degrees(w), 3) for n, w in zip(names, worst)},
+        "wall_s": round(time.perf_counter() - start, 4),
+    }
+
+
 def main():
     model = load()
     steps = 5 * CONTROL_HZ
@@ -239,6 +270,7 @@ def main():
     out["zero_action"] = run_scenario(load(), action_targets(model, zeros), steps)
     out["landing"] = run_scenario(load(), zeros, 2 * CONTROL_HZ, lift=0.10)
     out["servo_step"] = servo_step()
+    out["collapse"] = collapse()
     print(json.dumps(out, indent=2))
 
 

@@ -1,7 +1,9 @@
 //! The stateless actor: [`rollout`] turns a policy and a batch of environments into fixed-length
 //! trajectory chunks (no networking, so it is testable and benchmarkable alone); [`service`] puts
-//! it on Zenoh — weights in, chunks out, a liveliness token, a clean stop on SIGTERM.
+//! it on Zenoh — weights in, chunks out, a liveliness token, a clean stop on SIGTERM; [`eval`]
+//! scores a policy on benchmark tasks with the paper's metrics.
 
+pub mod eval;
 pub mod rollout;
 pub mod service;
 

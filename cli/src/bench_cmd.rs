@@ -349,4 +349,18 @@ fn print_fidelity(r: &FidelityReport) {
         "servo_step (root pinned, right knee to 70 deg): error {}",
         knee.join(", ")
     );
+    let mut worst: Vec<(&String, &f32)> = r.collapse.limit_excess_deg_by_joint.iter().collect();
+    worst.sort_by(|a, b| b.1.total_cmp(a.1));
+    let worst: Vec<String> = worst
+        .iter()
+        .take(3)
+        .map(|(n, e)| format!("{n} {e:.1}"))
+        .collect();
+    println!(
+        "collapse (servos off, {} s): worst joint past its range by {:.1} deg on average, at most {:.1} deg ({})",
+        lhm_sim::fidelity::COLLAPSE_S,
+        r.collapse.mean_limit_excess_deg,
+        r.collapse.max_limit_excess_deg,
+        worst.join(", ")
+    );
 }

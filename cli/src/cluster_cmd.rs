@@ -249,8 +249,9 @@ pub fn train(args: TrainArgs) -> Result<()> {
                 .with_context(|| format!("creating {}", log.display()))
                 .and_then(|file| {
                     let err = file.try_clone()?;
-                    Command::new(&exe)
-                        .args(["actor", "--connect", &endpoint, "--run-id", &run_id])
+                    let mut cmd = Command::new(&exe);
+                    die_with_parent(&mut cmd);
+                    cmd.args(["actor", "--connect", &endpoint, "--run-id", &run_id])
                         .args(["--role", &role, "--envs", &args.envs.to_string()])
                         .args(["--seed", &(1000 + i as u64).to_string()])
                         .args(["--actor-id", &format!("local-{i}")])
@@ -275,6 +276,32 @@ pub fn train(args: TrainArgs) -> Result<()> {
         return Err(e);
     }
     result
+}
+
+/// The child gets SIGTERM (its clean stop) when this process dies, however it dies, SIGKILL
+/// included: actors started by `lhm train` never outlive it (they were orphaned at full CPU).
+/// Linux's parent-death signal fires when the spawning thread ends: actors are spawned from the
+/// thread that runs the learner, which lives as long as the process.
+fn die_with_parent(cmd: &mut Command) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        let parent = std::process::id() as libc::pid_t;
+        // SAFETY: the closure runs between fork and exec and calls only async-signal-safe
+        // functions (prctl, getppid, raise); it allocates nothing.
+        unsafe {
+            cmd.pre_exec(move || {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                // The parent may have died before the prctl: nobody would signal then.
+                if libc::getppid() != parent {
+                    libc::raise(libc::SIGTERM);
+                }
+                Ok(())
+            });
+        }
+    }
 }
 
 /// SIGTERM to every actor (they finish their step and leave without a partial chunk), then

@@ -5,6 +5,7 @@ mod bench_cmd;
 mod cluster_bench;
 mod cluster_cmd;
 mod demo;
+mod eval_cmd;
 mod motion_cmd;
 mod plot_cmd;
 mod record_cmd;
@@ -46,6 +47,8 @@ enum Command {
     RenderRollout(render_cmd::RenderRolloutArgs),
     /// Training curves of a run (RUN_DIR/metrics.csv) as one PNG.
     Plot(plot_cmd::PlotArgs),
+    /// Score a policy on a benchmark split: Success k, Dist k, Success All, falls (paper Sec. 4.1).
+    Eval(eval_cmd::EvalArgs),
 }
 
 /// candle allocates a fresh buffer per tensor op and glibc serves large ones with mmap, so every
@@ -75,6 +78,7 @@ fn main() -> ExitCode {
         Command::Learner(args) => cluster_cmd::learner(args).map(|()| ExitCode::SUCCESS),
         Command::Actor(args) => cluster_cmd::actor(args).map(|()| ExitCode::SUCCESS),
         Command::Record(args) => record_cmd::run(args).map(|()| ExitCode::SUCCESS),
+        Command::Eval(args) => eval_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Scenes(args) => scenes_cmd::run(args),
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Motion(args) => motion_cmd::run(args).map(|()| ExitCode::SUCCESS),

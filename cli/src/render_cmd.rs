@@ -84,25 +84,11 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
     let policy = match a.policy.as_str() {
         "zero" => Policy::Zero,
         "random" => Policy::Random,
-        path => {
-            let stem = crate::record_cmd::checkpoint_stem(std::path::Path::new(path));
-            let learner = Learner::load(&stem, None)
-                .with_context(|| format!("loading the policy {}", stem.display()))?;
-            let (obs, act) = (
-                learner.actor_critic.obs_dim(),
-                learner.actor_critic.act_dim(),
-            );
-            let want = TaskEnv::obs_dim(&model, &train.env);
-            if obs != want || act != model.dofs.len() {
-                bail!(
-                    "{} takes {obs} observations and gives {act} actions; this environment has \
-                     {want} and {} (pass the run's --config)",
-                    stem.display(),
-                    model.dofs.len()
-                );
-            }
-            Policy::Trained(Box::new(learner))
-        }
+        path => Policy::Trained(Box::new(load_policy(
+            std::path::Path::new(path),
+            &train,
+            &model,
+        )?)),
     };
     let mut env = TaskEnv::new(
         &model,
@@ -185,4 +171,30 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         a.height
     );
     Ok(())
+}
+
+/// A learner checkpoint (`runs/<run>/checkpoint` or `policy`, with or without its extension) whose
+/// policy fits `train`'s environment for `model`.
+pub(crate) fn load_policy(
+    path: &std::path::Path,
+    train: &TrainConfig,
+    model: &CharacterModel,
+) -> Result<Learner> {
+    let stem = crate::record_cmd::checkpoint_stem(path);
+    let learner = Learner::load(&stem, None)
+        .with_context(|| format!("loading the policy {}", stem.display()))?;
+    let (obs, act) = (
+        learner.actor_critic.obs_dim(),
+        learner.actor_critic.act_dim(),
+    );
+    let want = TaskEnv::obs_dim(model, &train.env);
+    if obs != want || act != model.dofs.len() {
+        bail!(
+            "{} takes {obs} observations and gives {act} actions; this environment has \
+             {want} and {} (pass the run's --config)",
+            stem.display(),
+            model.dofs.len()
+        );
+    }
+    Ok(learner)
 }

@@ -13,6 +13,9 @@ use crate::{ClusterError, ClusterResult, RunSpec};
 struct PolicyJson {
     spec: RunSpec,
     obs_norm: Option<RunningMeanStd>,
+    /// Absent in messages from before value normalisation.
+    #[serde(default)]
+    value_norm: Option<RunningMeanStd>,
 }
 
 /// A decoded weights message: version, the run spec and a ready actor-critic.
@@ -44,6 +47,7 @@ pub fn encode_policy(
     let json = serde_json::to_string(&PolicyJson {
         spec: spec.clone(),
         obs_norm: ac.obs_norm.clone(),
+        value_norm: ac.value_norm.clone(),
     })
     .map_err(|e| ClusterError::Weights(format!("cannot serialise the run spec: {e}")))?;
     Ok(PolicyWeights {
@@ -72,6 +76,15 @@ pub fn decode_policy(bytes: &[u8]) -> ClusterResult<ReceivedPolicy> {
         _ => {
             return Err(ClusterError::Weights(
                 "config_json: observation normaliser missing or of the wrong width".into(),
+            ))
+        }
+    }
+    match (&ac.value_norm, &json.value_norm) {
+        (None, None) => {}
+        (Some(_), Some(norm)) if norm.dim() == 1 => ac.value_norm = Some(norm.clone()),
+        _ => {
+            return Err(ClusterError::Weights(
+                "config_json: value normaliser missing or not of width 1".into(),
             ))
         }
     }
@@ -107,11 +120,15 @@ mod tests {
 
     #[test]
     fn weights_round_trip_with_their_normaliser() {
-        let s = spec();
+        let mut s = spec();
+        s.actor_critic.normalize_value = true;
         let mut ac = ActorCritic::new(4, 2, &s.actor_critic).unwrap();
         if let Some(norm) = ac.obs_norm.as_mut() {
             norm.update(&[1.0, 2.0, 3.0, 4.0, -1.0, 0.5, 0.25, 8.0])
                 .unwrap();
+        }
+        if let Some(norm) = ac.value_norm.as_mut() {
+            norm.update(&[10.0, 30.0]).unwrap();
         }
         let msg = encode_policy("run", Role::Teacher1, 7, &s, &ac).unwrap();
         let got = decode_policy(&msg.encode_checked().unwrap()).unwrap();
@@ -119,7 +136,12 @@ mod tests {
         assert_eq!(got.role, Role::Teacher1);
         assert_eq!(got.spec, s);
         assert_eq!(got.actor_critic.obs_norm, ac.obs_norm);
+        assert_eq!(got.actor_critic.value_norm, ac.value_norm);
         let obs = [0.3, -0.1, 2.0, 5.0];
+        assert_eq!(
+            got.actor_critic.values(&obs).unwrap(),
+            ac.values(&obs).unwrap()
+        );
         assert_eq!(
             got.actor_critic.act_deterministic(&obs).unwrap(),
             ac.act_deterministic(&obs).unwrap()

@@ -17,6 +17,9 @@ pub struct PpoConfig {
     pub lambda: f32,
     pub clip_ratio: f64,
     /// Clip the value prediction to old_value ± this (PPO2 style); `None`: plain squared error.
+    /// Absent from a config file means `None` (TOML has no null, so a default of `Some` could not
+    /// be switched off).
+    #[serde(default)]
     pub value_clip: Option<f64>,
     pub value_coef: f64,
     pub entropy_coef: f64,
@@ -205,6 +208,13 @@ impl PpoTrainer {
             Some(norm) => norm.normalize(&batch.obs)?,
             None => batch.obs.clone(),
         };
+        // With a value normaliser the critic learns standardised returns; its statistics take
+        // this batch's returns in first, so the targets are on the scale it will be read at.
+        if let Some(norm) = &mut ac.value_norm {
+            norm.update(&batch.returns)?;
+        }
+        let returns = ac.normalize_values(&batch.returns);
+        let old_values = ac.normalize_values(&batch.old_values);
         let advantages = if self.config.normalize_advantages {
             standardize(&batch.advantages)
         } else {
@@ -221,9 +231,9 @@ impl PpoTrainer {
                     obs: gather_rows(&obs, obs_dim, chunk)?,
                     actions: gather_rows(&batch.actions, act_dim, chunk)?,
                     old_log_probs: gather(&batch.old_log_probs, chunk)?,
-                    old_values: gather(&batch.old_values, chunk)?,
+                    old_values: gather(&old_values, chunk)?,
                     advantages: gather(&advantages, chunk)?,
-                    returns: gather(&batch.returns, chunk)?,
+                    returns: gather(&returns, chunk)?,
                 };
                 let (losses, grad_norm) = self.minibatch_step(ac, &vars, &mb)?;
                 sums.grad_norm += grad_norm;
@@ -294,4 +304,60 @@ pub(crate) fn gather_rows(data: &[f32], width: usize, indices: &[usize]) -> Lear
 pub(crate) fn gather(data: &[f32], indices: &[usize]) -> LearnerResult<Tensor> {
     let out: Vec<f32> = indices.iter().map(|&i| data[i]).collect();
     Ok(Tensor::from_vec(out, indices.len(), &Device::Cpu)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lhm_nets::ActorCriticConfig;
+
+    /// Returns around 50 while a fresh critic outputs about 0: with a value normaliser one update
+    /// puts its values on the returns' scale; without, a raw critic is still far below.
+    #[test]
+    fn a_normalised_critic_reads_on_the_returns_scale_after_one_update() {
+        let (obs_dim, act_dim, n) = (4, 2, 256);
+        let mut rng = SplitMix64::new(5);
+        let obs: Vec<f32> = (0..n * obs_dim)
+            .map(|_| rng.uniform(-1.0, 1.0) as f32)
+            .collect();
+        let mean_value = |normalize_value: bool| {
+            let config = ActorCriticConfig {
+                normalize_value,
+                ..ActorCriticConfig::with_hidden(&[16])
+            };
+            let mut ac = ActorCritic::new(obs_dim, act_dim, &config).unwrap();
+            let mut act_rng = SplitMix64::new(9);
+            let act = ac.act(&obs, &mut act_rng).unwrap();
+            let returns: Vec<f32> = (0..n).map(|i| 50.0 + (i % 11) as f32 - 5.0).collect();
+            let batch = PpoBatch {
+                obs: obs.clone(),
+                actions: act.actions,
+                old_log_probs: act.log_probs,
+                old_values: act.values.clone(),
+                advantages: returns
+                    .iter()
+                    .zip(&act.values)
+                    .map(|(r, v)| r - v)
+                    .collect(),
+                returns,
+            };
+            let config = PpoConfig {
+                value_clip: None,
+                epochs: 1,
+                minibatch_size: n,
+                ..PpoConfig::default()
+            };
+            let mut trainer = PpoTrainer::new(config, &ac).unwrap();
+            trainer.update(&mut ac, &batch).unwrap();
+            let values = ac.values(&obs).unwrap();
+            values.iter().sum::<f32>() / n as f32
+        };
+        let normalised = mean_value(true);
+        let raw = mean_value(false);
+        assert!(
+            (normalised - 50.0).abs() < 5.0,
+            "normalised critic reads {normalised}"
+        );
+        assert!(raw.abs() < 10.0, "raw critic reads {raw}");
+    }
 }

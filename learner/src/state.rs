@@ -64,6 +64,9 @@ struct LearnerMeta {
     config: LearnerConfig,
     counters: Counters,
     obs_norm: Option<RunningMeanStd>,
+    /// Absent in checkpoints from before value normalisation.
+    #[serde(default)]
+    value_norm: Option<RunningMeanStd>,
     ppo_adam_step: u64,
     ppo_rng: SplitMix64,
     amp: Option<AmpMeta>,
@@ -167,6 +170,7 @@ impl Learner {
             config: self.config.clone(),
             counters: self.counters.clone(),
             obs_norm: self.actor_critic.obs_norm.clone(),
+            value_norm: self.actor_critic.value_norm.clone(),
             ppo_adam_step: self.ppo.adam.step_count(),
             ppo_rng: self.ppo.rng.clone(),
             amp: self.amp.as_ref().map(|amp| AmpMeta {
@@ -242,6 +246,16 @@ impl Learner {
             );
         }
         learner.actor_critic.obs_norm = meta.obs_norm.clone();
+        if meta.value_norm.as_ref().map(RunningMeanStd::dim)
+            != learner
+                .actor_critic
+                .value_norm
+                .as_ref()
+                .map(RunningMeanStd::dim)
+        {
+            return Err(mismatch("value normaliser missing or of the wrong width".into()).into());
+        }
+        learner.actor_critic.value_norm = meta.value_norm.clone();
 
         match (&mut learner.amp, &meta.amp) {
             (None, None) => {}

@@ -16,6 +16,8 @@ const ROWS: usize = 96;
 fn config() -> LearnerConfig {
     let mut actor_critic = ActorCriticConfig::with_hidden(&[32, 32]);
     actor_critic.policy.log_std = LogStd::Learned(-1.0);
+    // The value normaliser's statistics must survive the checkpoint too.
+    actor_critic.normalize_value = true;
     LearnerConfig {
         obs_dim: OBS,
         act_dim: ACT,

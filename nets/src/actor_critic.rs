@@ -16,6 +16,9 @@ pub struct ActorCriticConfig {
     pub value: MlpConfig,
     /// Whiten observations with running statistics before both networks.
     pub normalize_obs: bool,
+    /// The critic predicts returns standardised by a running mean and std of the returns
+    /// (IsaacGymEnvs' `normalize_value`); its outputs are mapped back before anyone sees them.
+    pub normalize_value: bool,
     /// Seed of the initial weights.
     pub init_seed: u64,
 }
@@ -26,6 +29,7 @@ impl Default for ActorCriticConfig {
             policy: GaussianPolicyConfig::default(),
             value: MlpConfig::default(),
             normalize_obs: true,
+            normalize_value: false,
             init_seed: 0,
         }
     }
@@ -56,6 +60,8 @@ pub struct ActorCritic {
     pub value: ValueNet,
     /// `None` when `normalize_obs` is off.
     pub obs_norm: Option<RunningMeanStd>,
+    /// Running statistics of the returns (width 1); `None` when `normalize_value` is off.
+    pub value_norm: Option<RunningMeanStd>,
 }
 
 impl ActorCritic {
@@ -64,12 +70,40 @@ impl ActorCritic {
         let policy = GaussianPolicy::new(obs_dim, act_dim, &config.policy, &mut rng, DType::F32)?;
         let value = ValueNet::new(obs_dim, &config.value, &mut rng, DType::F32)?;
         let obs_norm = config.normalize_obs.then(|| RunningMeanStd::new(obs_dim));
+        let value_norm = config.normalize_value.then(|| RunningMeanStd::new(1));
         Ok(Self {
             config: config.clone(),
             policy,
             value,
             obs_norm,
+            value_norm,
         })
+    }
+
+    /// Returns' mean and std under the value normaliser ((0, 1) without one).
+    fn value_scale(&self) -> (f64, f64) {
+        match &self.value_norm {
+            Some(n) => (n.mean()[0], (n.var()[0] + n.epsilon).sqrt()),
+            None => (0.0, 1.0),
+        }
+    }
+
+    /// Critic outputs → values on the returns' scale.
+    pub fn denormalize_values(&self, outputs: &[f32]) -> Vec<f32> {
+        let (mean, std) = self.value_scale();
+        outputs
+            .iter()
+            .map(|&v| (v as f64 * std + mean) as f32)
+            .collect()
+    }
+
+    /// Values on the returns' scale → what the critic is trained to output (not clipped).
+    pub fn normalize_values(&self, values: &[f32]) -> Vec<f32> {
+        let (mean, std) = self.value_scale();
+        values
+            .iter()
+            .map(|&v| ((v as f64 - mean) / std) as f32)
+            .collect()
     }
 
     pub fn obs_dim(&self) -> usize {
@@ -95,7 +129,7 @@ impl ActorCritic {
         Ok(ActOutput {
             actions: actions.flatten_all()?.to_vec1()?,
             log_probs: log_probs.to_vec1()?,
-            values: self.value.forward(&obs)?.to_vec1()?,
+            values: self.denormalize_values(&self.value.forward(&obs)?.to_vec1()?),
         })
     }
 
@@ -108,12 +142,13 @@ impl ActorCritic {
             .to_vec1()?)
     }
 
-    /// V(s) for raw observations (e.g. to bootstrap a truncated episode).
+    /// V(s) on the returns' scale for raw observations (e.g. to bootstrap a truncated episode).
     pub fn values(&self, raw_obs: &[f32]) -> NetResult<Vec<f32>> {
-        Ok(self
+        let outputs = self
             .value
             .forward(&self.input_tensor(raw_obs)?)?
-            .to_vec1()?)
+            .to_vec1()?;
+        Ok(self.denormalize_values(&outputs))
     }
 
     /// Every trained parameter: `policy.*` then `value.*`.

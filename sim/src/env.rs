@@ -21,7 +21,7 @@ use rapier3d::math::Vector;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct EnvConfig {
     pub weights: RewardWeights,
     pub release_retreat: ReleaseRetreat,
@@ -443,6 +443,25 @@ impl TaskEnv {
             }
         }
         out
+    }
+
+    /// Control steps taken since the episode started.
+    pub fn steps(&self) -> u32 {
+        self.steps
+    }
+
+    /// Placement error (m) of every pair of the task, in order: a handed-off pair's error at its
+    /// handoff, any other pair's error now (the current one mid-cycle, later ones where their
+    /// objects lie: an episode cut short still scores every pair).
+    pub fn pair_errors(&self) -> Vec<f32> {
+        (0..self.task.sequence.len())
+            .map(|k| match self.cycles.results.get(k) {
+                Some(r) => r.dist,
+                None => self.pair(k).map_or(f32::NAN, |(i, goal, _)| {
+                    placement_error(self.object_state(i).pos, goal)
+                }),
+            })
+            .collect()
     }
 
     pub fn snapshot(&self) -> EnvSnapshot {

@@ -8,10 +8,11 @@
 //! - `neutral_hold`: every PD target 0 (the neutral pose); does it stand, do its feet stay put;
 //! - `zero_action`: the policy's action 0 through the action mapping (must equal `neutral_hold`);
 //! - `landing`: the neutral hold dropped from 10 cm higher; does the ground reaction bounce;
-//! - `servo_step`: root pinned, the right knee's target steps to 70°; the servo alone.
+//! - `servo_step`: root pinned, the right knee's target steps to 70°; the servo alone;
+//! - `collapse`: servos off through the fall and after: do the joints stay within their ranges.
 
 use crate::mjcf::{CharacterModel, JointKind};
-use crate::motion::joints::xyz_angles;
+use crate::motion::joints::{alternative_angles, range_excess, xyz_angles};
 use crate::obs::{joint_state, twist_angle, BodyState};
 use crate::task::terminations::fall_exempt;
 use crate::world::{SimConfig, World};
@@ -70,6 +71,21 @@ pub struct ServoStepReport {
     pub wall_s: f64,
 }
 
+/// How long the `collapse` scenario runs (s): the body is down on the floor well before.
+pub const COLLAPSE_S: f32 = 3.0;
+
+/// Servos off through the fall and after: how far (degrees) joints went past their ranges, read
+/// at the end of each control step. Near gimbal lock (a 3-DoF joint's y angle near ±90°) its x and
+/// z angles are ill-defined and single steps can read large; the mean over steps of the worst DoF
+/// is the robust figure.
+#[derive(Clone, Debug, Serialize)]
+pub struct CollapseReport {
+    pub mean_limit_excess_deg: f32,
+    pub max_limit_excess_deg: f32,
+    pub limit_excess_deg_by_joint: BTreeMap<String, f32>,
+    pub wall_s: f64,
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct FidelityReport {
     pub settings: SimConfig,
@@ -78,6 +94,7 @@ pub struct FidelityReport {
     pub zero_action: ScenarioReport,
     pub landing: ScenarioReport,
     pub servo_step: ServoStepReport,
+    pub collapse: CollapseReport,
 }
 
 /// What drives the servos during a scenario.
@@ -115,6 +132,39 @@ pub fn joint_angles(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
                 let a = xyz_angles(rel);
                 for k in 0..3 {
                     out[dofs[k]] = a[k];
+                }
+            }
+            JointKind::Free | JointKind::Fixed => {}
+        }
+    }
+    out
+}
+
+/// How far (radians, ≥ 0) each actuated DoF's angle lies outside its range, model order. A 3-DoF
+/// joint is read as the x-y-z angle triple nearer its ranges (two triples give each rotation).
+pub fn limit_excess(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
+    let excess = |x: f32, [lo, hi]: [f32; 2]| (lo - x).max(x - hi).max(0.0);
+    let range = |d: usize| model.dofs[d].range.map(|r| r as f32);
+    let mut out = vec![0.0; model.dofs.len()];
+    for (i, body) in model.bodies.iter().enumerate() {
+        let Some(p) = body.parent else { continue };
+        let (rel, _) = joint_state(&bodies[p], &bodies[i]);
+        match &body.joint {
+            JointKind::Hinge { dof } => {
+                let axis = Vector::from_array(model.dofs[*dof].axis.map(|a| a as f32));
+                out[*dof] = excess(twist_angle(rel, axis), range(*dof));
+            }
+            JointKind::Ball { dofs } => {
+                let ranges = dofs.map(range);
+                let principal = xyz_angles(rel);
+                let other = alternative_angles(principal);
+                let angles = if range_excess(other, ranges) < range_excess(principal, ranges) {
+                    other
+                } else {
+                    principal
+                };
+                for k in 0..3 {
+                    out[dofs[k]] = excess(angles[k], ranges[k]);
                 }
             }
             JointKind::Free | JointKind::Fixed => {}
@@ -197,13 +247,7 @@ pub fn run_scenario(
         Drive::ZeroAction => world.character.targets(&vec![0.0; model.dofs.len()]),
     };
     if drive == Drive::Passive {
-        // Servos off: no spring, no motor, no servo damping (armature stays).
-        world.character.model.dofs.iter_mut().for_each(|d| {
-            d.kp = 1e-9;
-            d.kd = 0.0;
-            d.torque_limit = 0.0;
-        });
-        zero_servo_damping(&mut world);
+        servos_off(&mut world);
     }
     let mut report = ScenarioReport {
         fall_step: None,
@@ -311,6 +355,46 @@ pub fn run_scenario(
 }
 
 /// Removes the servo damping [`crate::character`] put on the multibody (passive drop).
+/// Servos off: no spring, no motor, no servo damping (armature and range limits stay).
+fn servos_off(world: &mut World) {
+    world.character.model.dofs.iter_mut().for_each(|d| {
+        d.kp = 1e-9;
+        d.kd = 0.0;
+        d.torque_limit = 0.0;
+    });
+    zero_servo_damping(world);
+}
+
+/// Servos off for [`COLLAPSE_S`], on through the fall: the range limits alone hold the joints.
+pub fn run_collapse(model: &CharacterModel, sim: &SimConfig) -> CollapseReport {
+    let started = Instant::now();
+    let config = SimConfig {
+        pin_root: false,
+        ..sim.clone()
+    };
+    let mut world = World::new(model, config);
+    servos_off(&mut world);
+    let targets = vec![0.0; model.dofs.len()];
+    let steps = (COLLAPSE_S * sim.control_hz).round() as u32;
+    let mut by_joint: BTreeMap<String, f32> = BTreeMap::new();
+    let mut sum_worst = 0.0f32;
+    for _ in 0..steps {
+        world.step_targets(&targets);
+        let excess = limit_excess(model, &world.body_states());
+        sum_worst += excess.iter().copied().fold(0.0, f32::max).to_degrees();
+        for (d, e) in model.dofs.iter().zip(excess) {
+            let slot = by_joint.entry(d.name.clone()).or_insert(0.0);
+            *slot = slot.max(e.to_degrees());
+        }
+    }
+    CollapseReport {
+        mean_limit_excess_deg: sum_worst / steps.max(1) as f32,
+        max_limit_excess_deg: by_joint.values().copied().fold(0.0, f32::max),
+        limit_excess_deg_by_joint: by_joint,
+        wall_s: started.elapsed().as_secs_f64(),
+    }
+}
+
 fn zero_servo_damping(world: &mut World) {
     // Every link is in the one multibody: any joint's handle reaches it.
     if let Some(h) = world.character.joints.iter().flatten().next().copied() {
@@ -365,5 +449,6 @@ pub fn run_fidelity(model: &CharacterModel, sim: &SimConfig) -> FidelityReport {
         zero_action: run_scenario(model, sim, Drive::ZeroAction, 5.0, 0.0, false),
         landing: run_scenario(model, sim, Drive::Neutral, 2.0, 0.10, true),
         servo_step: run_servo_step(model, sim),
+        collapse: run_collapse(model, sim),
     }
 }

@@ -1,6 +1,7 @@
 //! Physics fidelity at the training settings: the character holds a standing pose as MuJoCo does.
 
-use lhm_sim::fidelity::{run_scenario, run_servo_step, Drive};
+use lhm_sim::character::ball_limit_error;
+use lhm_sim::fidelity::{run_collapse, run_scenario, run_servo_step, Drive};
 use lhm_sim::{CharacterModel, SimConfig, World};
 
 #[test]
@@ -70,4 +71,61 @@ fn servos_off_the_character_falls_and_the_knee_servo_reaches_its_target() {
         at("0.03") > 40.0 && at("0.1") < at("0.03") && at("0.5") < 3.0,
         "{s:?}"
     );
+}
+
+#[test]
+fn three_dof_joints_stay_within_their_ranges_while_the_body_collapses() {
+    let model = CharacterModel::amp_humanoid();
+    let sim = SimConfig::default();
+    let limited = run_collapse(&model, &sim);
+    // MuJoCo (soft limits): 1.1 deg on average, 6.5 at most. Without the limit springs the hips
+    // and a shoulder rest 15-30 deg past their ranges on the floor.
+    assert!(limited.mean_limit_excess_deg < 4.0, "{limited:?}");
+    for joint in ["left_ankle_y", "right_ankle_y", "abdomen_x", "abdomen_y"] {
+        let e = limited.limit_excess_deg_by_joint[joint];
+        assert!(e < 10.0, "{joint} {e} deg past its range");
+    }
+    // The same collapse on a world whose limit springs are removed goes far past.
+    let mut world = World::new(&model, sim.clone());
+    world.character.limit_stiffness.fill(0.0);
+    world.character.limit_damping.fill(0.0);
+    world.character.model.dofs.iter_mut().for_each(|d| {
+        d.kp = 1e-9;
+        d.kd = 0.0;
+        d.torque_limit = 0.0;
+    });
+    let zeros = vec![0.0; model.dofs.len()];
+    let steps = (lhm_sim::fidelity::COLLAPSE_S * sim.control_hz).round() as usize;
+    let mut sum_worst = 0.0f32;
+    for _ in 0..steps {
+        world.step_targets(&zeros);
+        let excess = lhm_sim::fidelity::limit_excess(&model, &world.body_states());
+        sum_worst += excess.iter().copied().fold(0.0, f32::max).to_degrees();
+    }
+    let unlimited = sum_worst / steps as f32;
+    println!(
+        "worst DoF past its range, mean: {:.2} deg with limits, {unlimited:.2} without",
+        limited.mean_limit_excess_deg
+    );
+    assert!(
+        unlimited > 3.0 * limited.mean_limit_excess_deg,
+        "without limits {unlimited} deg"
+    );
+}
+
+#[test]
+fn the_limit_error_of_a_three_dof_joint_points_back_into_its_ranges() {
+    use rapier3d::math::Rotation;
+    let ranges = [[-0.5, 0.5], [-1.0, 1.0], [-0.3, 0.3]];
+    let inside = Rotation::from_rotation_x(0.4) * Rotation::from_rotation_y(-0.9);
+    assert!(ball_limit_error(inside, ranges).is_none());
+    let past_x = Rotation::from_rotation_x(0.8);
+    let e = ball_limit_error(past_x, ranges).expect("0.8 rad is past 0.5");
+    assert!(
+        (e.x + 0.3).abs() < 1e-4 && e.y.abs() < 1e-4 && e.z.abs() < 1e-4,
+        "{e:?}"
+    );
+    // Applying the error lands on the range's edge.
+    let back = Rotation::from_scaled_axis(e) * past_x;
+    assert!(ball_limit_error(back, ranges).is_none_or(|e| e.length() < 1e-4));
 }

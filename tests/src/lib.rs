@@ -160,6 +160,61 @@ pub fn start_actor(dir: &Path, port: u16, id: &str, seed: u64) -> Proc {
     spawn(id, &args, &dir.join(format!("{id}.log")))
 }
 
+/// `lhm train` on loopback with `--no-amp`, `actors` actor processes of 2 environments each.
+pub fn start_train(dir: &Path, config: &Path, actors: usize) -> Proc {
+    let args: Vec<String> = [
+        "train",
+        "--config",
+        &config.display().to_string(),
+        "--runs-dir",
+        &dir.join("runs").display().to_string(),
+        "--no-amp",
+        "--actors",
+        &actors.to_string(),
+        "--envs",
+        "2",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    spawn("train", &args, &dir.join("train.log"))
+}
+
+/// Pids of the live (not zombie) processes whose parent is `parent`, read from /proc.
+pub fn children_of(parent: i32) -> Vec<i32> {
+    let mut out = Vec::new();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return out;
+    };
+    for e in entries.flatten() {
+        let Some(pid) = e.file_name().to_str().and_then(|n| n.parse::<i32>().ok()) else {
+            continue;
+        };
+        if let Some((state, ppid)) = proc_state(pid) {
+            if ppid == parent && state != 'Z' {
+                out.push(pid);
+            }
+        }
+    }
+    out
+}
+
+/// (state letter, parent pid) of a process from /proc/PID/stat; `None` once it is gone.
+pub fn proc_state(pid: i32) -> Option<(char, i32)> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // "pid (comm) S ppid ...": comm may hold spaces, so parse after its closing parenthesis.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let mut fields = rest.split_whitespace();
+    let state = fields.next()?.chars().next()?;
+    let ppid = fields.next()?.parse().ok()?;
+    Some((state, ppid))
+}
+
+/// Gone, or a zombie waiting for whoever reaps orphans.
+pub fn exited(pid: i32) -> bool {
+    proc_state(pid).is_none_or(|(state, _)| state == 'Z')
+}
+
 /// The learner's `status.json` (`Null` until it exists and parses).
 pub fn status(dir: &Path) -> serde_json::Value {
     std::fs::read(dir.join("runs/e2e/status.json"))

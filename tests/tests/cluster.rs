@@ -1,7 +1,8 @@
 //! The actor–learner service across real processes on loopback (DESIGN.md §3): the policy
 //! version advances with two actors; a SIGKILLed actor costs nothing but its unfinished chunk;
 //! a SIGKILLed learner resumes from its checkpoint and the running actors come back to it;
-//! garbage on the trajectory key is rejected and counted.
+//! garbage on the trajectory key is rejected and counted; a SIGKILLed `lhm train` takes its actor
+//! processes with it.
 
 use std::time::Duration;
 
@@ -196,4 +197,29 @@ fn malformed_and_wrong_version_messages_are_rejected_and_counted() {
     assert_eq!(u64_at(&s, "/intake/malformed"), 2, "{s:#}");
     assert_eq!(u64_at(&s, "/intake/accepted"), 0);
     assert!(learner.is_running(), "the learner survived");
+}
+
+#[test]
+fn a_killed_lhm_train_takes_its_actor_processes_with_it() {
+    let dir = scratch_dir("kill-train");
+    let config = write_config(&dir);
+    let mut train = start_train(&dir, &config, 2);
+    wait_for(&dir, "an iteration with both actors", LONG, |s| {
+        u64_at(s, "/iteration") >= 1 && alive(s).len() >= 2
+    });
+    let actors = children_of(train.pid());
+    assert_eq!(actors.len(), 2, "actor processes of lhm train: {actors:?}");
+    train.signal(libc::SIGKILL);
+    train
+        .wait_exit(Duration::from_secs(10))
+        .expect("lhm train dies");
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    while actors.iter().any(|&pid| !exited(pid)) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "actors {actors:?} outlived their lhm train: {:?}",
+            actors.iter().map(|&p| proc_state(p)).collect::<Vec<_>>()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
 }

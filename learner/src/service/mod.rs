@@ -98,7 +98,12 @@ impl Default for TrainConfig {
             max_policy_lag: 3,
             checkpoint_every: 10,
             max_iterations: None,
-            network: ActorCriticConfig::with_hidden(&[512, 256]),
+            network: ActorCriticConfig {
+                // IsaacGymEnvs HumanoidAMP: normalize_value True. Returns run from ~3 (a fall in
+                // the first second) to tens; a critic regressing them raw at lr 5e-5 lagged.
+                normalize_value: true,
+                ..ActorCriticConfig::with_hidden(&[512, 256])
+            },
             ppo,
             amp_enabled: true,
             amp,
@@ -174,13 +179,20 @@ impl TrainConfig {
         }
     }
 
-    /// Reads a TOML file; errors name the file and the field.
+    /// Reads a TOML file; errors name the file and the field. The file's tables are laid over
+    /// this run's defaults key by key, so `[ppo] epochs = 2` changes the epochs and keeps the
+    /// rest of the run's PPO settings (deserialising a partial `[ppo]` on its own would fill the
+    /// gaps from `PpoConfig::default()`, whose values are not the run's).
     pub fn from_toml_file(path: &Path) -> Result<Self, ServiceError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
-        let de = toml::Deserializer::parse(&text)
+        let user: toml::Table = text
+            .parse()
             .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
-        serde_path_to_error::deserialize(de).map_err(|e| {
+        let mut merged = toml::Table::try_from(Self::default())
+            .map_err(|e| ServiceError::Config(format!("the built-in defaults: {e}")))?;
+        overlay(&mut merged, user);
+        serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| {
             ServiceError::Config(format!(
                 "{}: field `{}`: {}",
                 path.display(),
@@ -188,6 +200,18 @@ impl TrainConfig {
                 e.inner()
             ))
         })
+    }
+}
+
+/// Lays `top` over `base`: tables merge key by key, any other value replaces.
+fn overlay(base: &mut toml::Table, top: toml::Table) {
+    for (key, value) in top {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(t)) => overlay(b, t),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
     }
 }
 
@@ -792,6 +816,25 @@ mod tests {
         assert_eq!(c.run_id, "x");
         assert_eq!(c.ppo.epochs, 2);
         assert_eq!(c.batch_steps, TrainConfig::default().batch_steps);
+        // The rest of [ppo] keeps the run's defaults, not PpoConfig::default()'s.
+        let d = TrainConfig::default();
+        assert_eq!(c.ppo.value_clip, d.ppo.value_clip);
+        assert_eq!(c.ppo.adam, d.ppo.adam);
+        assert_eq!(c.ppo.minibatch_size, d.ppo.minibatch_size);
+        let c2 = parse("[ppo.adam]\nlr = 1e-3\n[env]\nwalk_speed = 0.5\n").unwrap();
+        assert_eq!(c2.ppo.adam.lr, 1e-3);
+        assert_eq!(c2.ppo.adam.eps, d.ppo.adam.eps);
+        assert_eq!(c2.ppo.epochs, d.ppo.epochs);
+        assert_eq!(c2.env.demo_start_probability, d.env.demo_start_probability);
+        let err = parse("[ppo.adam]\nlearning_rate = 1e-3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("ppo.adam.learning_rate"), "{err}");
+        // A misspelt reward weight is an error too, not a silently ignored key.
+        let err = parse("[env.weights]\nlocomotoin = 1.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("locomotoin"), "{err}");
         assert!(c.learner_config().amp.is_none());
         assert_eq!(c.run_spec().amp_dim, 0);
 

@@ -6,7 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct SwitchParams {
     /// Object speed below which it counts as settled, m/s.
     pub settle_speed: f32,

@@ -101,7 +101,7 @@ pub fn power_penalty(torques: &[f32], joint_velocities: &[f32]) -> f32 {
 
 /// Parameters of the release-and-retreat reward (paper, Algorithm 1).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ReleaseRetreat {
     /// Growth rate of the distance terms, 1/m.
     pub alpha: f32,
@@ -154,7 +154,7 @@ pub fn release_and_retreat(
 /// Weights of the task reward terms (the power term is a penalty: its weight is positive and its
 /// value negative).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct RewardWeights {
     pub locomotion: f32,
     pub hands: f32,

@@ -1,0 +1,469 @@
+//! Evaluation: a policy's deterministic actions on benchmark tasks, scored with the paper's
+//! metrics (Sec. 4.1) per cycle: Success k (the k-th object's root within 0.2 m of its goal when
+//! its cycle ends), Dist k (its placement error then, m), Success All (every cycle of the episode
+//! succeeded), and falls. Episodes run in lockstep batches: one batched forward pass per control
+//! step, the environments stepped in parallel on every core.
+
+use lhm_nets::{ActorCritic, NetError, SplitMix64};
+use lhm_scenes::{Catalogue, Task};
+use lhm_sim::env::{EnvConfig, TaskEnv};
+use lhm_sim::{CharacterModel, SimConfig};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Seeds ≥ 1 turn the character's start heading by a uniform angle within ± this (radians), so
+/// seeds differ while the physics and the actions stay deterministic; seed 0 is every task
+/// exactly as specified.
+pub const START_YAW_JITTER: f64 = 0.2;
+
+/// Control steps an episode may run after its pairs' cycle time limits (the last handoff needs a
+/// step to register).
+const EPISODE_SLACK_STEPS: u32 = 30;
+
+/// One (task, seed) episode's outcome.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EpisodeEval {
+    pub task_id: String,
+    pub seed: u64,
+    /// Per pair, in order: placed within the success radius when its cycle ended (a cycle that
+    /// never ended, after a fall or at the time limit, failed).
+    pub success: Vec<bool>,
+    /// Per pair: placement error (m) when its cycle ended, or at the episode's end for a pair
+    /// whose cycle did not end.
+    pub dist: Vec<f32>,
+    pub fell: bool,
+    /// The physics guard tripped: the episode was cut and counts as failed.
+    pub physics_invalid: bool,
+    pub steps: u32,
+}
+
+impl EpisodeEval {
+    pub fn success_all(&self) -> bool {
+        self.success.iter().all(|&s| s)
+    }
+}
+
+/// `task` as seed `seed` runs it (see [`START_YAW_JITTER`]).
+pub fn seeded_task(task: &Task, seed: u64) -> Task {
+    let mut t = task.clone();
+    if seed > 0 {
+        // The task id keeps seeds independent across tasks.
+        let id_hash = task.id.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        });
+        let mut rng = SplitMix64::new(seed ^ id_hash);
+        t.start.yaw += START_YAW_JITTER * (2.0 * rng.next_f64() - 1.0);
+    }
+    t
+}
+
+struct Slot {
+    env: TaskEnv,
+    seed: u64,
+    action: Vec<f32>,
+    result: Option<EpisodeEval>,
+}
+
+impl Slot {
+    fn finish(&mut self, fell: bool, physics_invalid: bool, steps: u32) {
+        let pairs = self.env.task.sequence.len();
+        let mut success: Vec<bool> = self.env.cycles.results.iter().map(|r| r.success).collect();
+        success.resize(pairs, false);
+        if physics_invalid {
+            success.fill(false);
+        }
+        self.result = Some(EpisodeEval {
+            task_id: self.env.task.id.clone(),
+            seed: self.seed,
+            success,
+            dist: self.env.pair_errors(),
+            fell,
+            physics_invalid,
+            steps,
+        });
+    }
+}
+
+/// Where and how episodes run: the character, the objects, the simulator and environment
+/// settings (the run's), and how many environments step in lockstep.
+pub struct EvalSetup<'a> {
+    pub model: &'a CharacterModel,
+    pub catalogue: &'a Catalogue,
+    pub sim: &'a SimConfig,
+    pub env: &'a EnvConfig,
+    pub batch: usize,
+}
+
+/// Runs every `(task, seed)` job with `ac`'s mean actions, `setup.batch` environments at a time;
+/// `progress` is called with the number of episodes finished so far. Results keep the jobs'
+/// order. Each episode may run every pair's cycle time limit (`env.switching.max_cycle_steps`).
+pub fn evaluate(
+    ac: &ActorCritic,
+    setup: &EvalSetup,
+    jobs: &[(Task, u64)],
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<Vec<EpisodeEval>, NetError> {
+    let EvalSetup {
+        model,
+        catalogue,
+        sim,
+        env,
+        batch,
+    } = *setup;
+    let act_dim = ac.act_dim();
+    let mut out = Vec::with_capacity(jobs.len());
+    for chunk in jobs.chunks(batch.max(1)) {
+        let mut slots: Vec<Slot> = chunk
+            .par_iter()
+            .map(|(task, seed)| {
+                let task = seeded_task(task, *seed);
+                let pairs = task.sequence.len() as u32;
+                let config = EnvConfig {
+                    max_episode_steps: pairs * env.switching.max_cycle_steps + EPISODE_SLACK_STEPS,
+                    demo_start_probability: 0.0,
+                    ..env.clone()
+                };
+                Slot {
+                    env: TaskEnv::new(model, &task, catalogue, sim.clone(), config),
+                    seed: *seed,
+                    action: vec![0.0; act_dim],
+                    result: None,
+                }
+            })
+            .collect();
+        loop {
+            let active: Vec<usize> = (0..slots.len())
+                .filter(|&i| slots[i].result.is_none())
+                .collect();
+            if active.is_empty() {
+                break;
+            }
+            let obs: Vec<f32> = active
+                .par_iter()
+                .map(|&i| slots[i].env.observation())
+                .collect::<Vec<_>>()
+                .concat();
+            let actions = ac.act_deterministic(&obs)?;
+            for (row, &i) in actions.chunks_exact(act_dim).zip(&active) {
+                slots[i].action.copy_from_slice(row);
+            }
+            slots
+                .par_iter_mut()
+                .filter(|s| s.result.is_none())
+                .for_each(|s| {
+                    let action = std::mem::take(&mut s.action);
+                    let r = s.env.step(&action);
+                    s.action = action;
+                    if r.done || r.truncated || r.physics_invalid {
+                        let steps = s.env.steps();
+                        s.finish(r.fell, r.physics_invalid, steps);
+                    }
+                });
+        }
+        out.extend(slots.into_iter().filter_map(|s| s.result));
+        progress(out.len());
+    }
+    Ok(out)
+}
+
+/// Mean and sample standard deviation over seeds (std 0 with one seed).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct MeanStd {
+    pub mean: f64,
+    pub std: f64,
+}
+
+impl MeanStd {
+    fn of(xs: &[f64]) -> Self {
+        let n = xs.len() as f64;
+        if xs.is_empty() {
+            return Self {
+                mean: f64::NAN,
+                std: f64::NAN,
+            };
+        }
+        let mean = xs.iter().sum::<f64>() / n;
+        let std = if xs.len() > 1 {
+            (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+        } else {
+            0.0
+        };
+        Self { mean, std }
+    }
+}
+
+/// The paper's table row for one policy on one split: per cycle k (1-based index k-1), the
+/// fraction of episodes with at least k pairs whose k-th cycle succeeded and their mean Dist k;
+/// Success All; the fall rate. Each is computed per seed, then mean ± std over seeds.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EvalTable {
+    pub episodes: usize,
+    pub seeds: Vec<u64>,
+    pub success: Vec<MeanStd>,
+    pub dist: Vec<MeanStd>,
+    pub success_all: MeanStd,
+    pub fall_rate: MeanStd,
+}
+
+pub fn summarize(episodes: &[EpisodeEval]) -> EvalTable {
+    let mut seeds: Vec<u64> = episodes.iter().map(|e| e.seed).collect();
+    seeds.sort_unstable();
+    seeds.dedup();
+    let max_pairs = episodes.iter().map(|e| e.success.len()).max().unwrap_or(0);
+    let per_seed = |f: &dyn Fn(&[&EpisodeEval]) -> Option<f64>| -> MeanStd {
+        let values: Vec<f64> = seeds
+            .iter()
+            .filter_map(|s| {
+                let of_seed: Vec<&EpisodeEval> = episodes.iter().filter(|e| e.seed == *s).collect();
+                f(&of_seed)
+            })
+            .collect();
+        MeanStd::of(&values)
+    };
+    let mean = |xs: Vec<f64>| (!xs.is_empty()).then(|| xs.iter().sum::<f64>() / xs.len() as f64);
+    let success = (0..max_pairs)
+        .map(|k| {
+            per_seed(&|es| {
+                mean(
+                    es.iter()
+                        .filter_map(|e| e.success.get(k).map(|&s| f64::from(u8::from(s))))
+                        .collect(),
+                )
+            })
+        })
+        .collect();
+    let dist = (0..max_pairs)
+        .map(|k| {
+            per_seed(&|es| {
+                mean(
+                    es.iter()
+                        .filter_map(|e| e.dist.get(k).map(|&d| f64::from(d)))
+                        .collect(),
+                )
+            })
+        })
+        .collect();
+    EvalTable {
+        episodes: episodes.len(),
+        success,
+        dist,
+        success_all: per_seed(&|es| {
+            mean(
+                es.iter()
+                    .map(|e| f64::from(u8::from(e.success_all())))
+                    .collect(),
+            )
+        }),
+        fall_rate: per_seed(&|es| mean(es.iter().map(|e| f64::from(u8::from(e.fell))).collect())),
+        seeds,
+    }
+}
+
+impl EvalTable {
+    /// Flat keys for `--json`: `success_k`, `dist_k` (k from 1), `success_all`, `fall_rate`, as
+    /// fractions and metres (means over seeds), each with a `_std` twin.
+    pub fn flat(&self) -> std::collections::BTreeMap<String, f64> {
+        let mut out = std::collections::BTreeMap::new();
+        let mut put = |key: String, v: MeanStd| {
+            out.insert(format!("{key}_std"), v.std);
+            out.insert(key, v.mean);
+        };
+        for (k, v) in self.success.iter().enumerate() {
+            put(format!("success_{}", k + 1), *v);
+        }
+        for (k, v) in self.dist.iter().enumerate() {
+            put(format!("dist_{}", k + 1), *v);
+        }
+        put("success_all".into(), self.success_all);
+        put("fall_rate".into(), self.fall_rate);
+        out
+    }
+
+    /// The table in the paper's layout (success in %, Dist in m), one row named `method`.
+    pub fn markdown(&self, method: &str) -> String {
+        let k = self.success.len();
+        let mut head = vec!["Method".to_string()];
+        head.extend((1..=k).map(|i| format!("Success {i} (%)")));
+        head.push("Success All (%)".into());
+        head.extend((1..=k).map(|i| format!("Dist {i} (m)")));
+        head.push("Falls (%)".into());
+        let pct = |v: &MeanStd| format!("{:.1} ± {:.1}", 100.0 * v.mean, 100.0 * v.std);
+        let m = |v: &MeanStd| format!("{:.3} ± {:.3}", v.mean, v.std);
+        let mut row = vec![method.to_string()];
+        row.extend(self.success.iter().map(pct));
+        row.push(pct(&self.success_all));
+        row.extend(self.dist.iter().map(m));
+        row.push(pct(&self.fall_rate));
+        format!(
+            "| {} |\n|{}\n| {} |\n",
+            head.join(" | "),
+            "---|".repeat(head.len()),
+            row.join(" | ")
+        )
+    }
+}
+
+/// One line per episode: `task_id,seed,steps,fell,physics_invalid,success_1..K,dist_1..K` (empty
+/// fields where a task has fewer pairs), with a header.
+pub fn episodes_csv(episodes: &[EpisodeEval]) -> String {
+    let k = episodes.iter().map(|e| e.success.len()).max().unwrap_or(0);
+    let mut out = String::from("task_id,seed,steps,fell,physics_invalid");
+    for i in 1..=k {
+        out.push_str(&format!(",success_{i}"));
+    }
+    for i in 1..=k {
+        out.push_str(&format!(",dist_{i}"));
+    }
+    out.push('\n');
+    for e in episodes {
+        out.push_str(&format!(
+            "{},{},{},{},{}",
+            e.task_id,
+            e.seed,
+            e.steps,
+            u8::from(e.fell),
+            u8::from(e.physics_invalid)
+        ));
+        for i in 0..k {
+            out.push(',');
+            if let Some(s) = e.success.get(i) {
+                out.push_str(if *s { "1" } else { "0" });
+            }
+        }
+        for i in 0..k {
+            out.push(',');
+            if let Some(d) = e.dist.get(i) {
+                out.push_str(&format!("{d:.4}"));
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn episode(seed: u64, success: &[bool], dist: &[f32], fell: bool) -> EpisodeEval {
+        EpisodeEval {
+            task_id: format!("t{seed}"),
+            seed,
+            success: success.to_vec(),
+            dist: dist.to_vec(),
+            fell,
+            physics_invalid: false,
+            steps: 10,
+        }
+    }
+
+    #[test]
+    fn table_is_per_seed_then_mean_and_std_over_seeds() {
+        let eps = [
+            // Seed 0: cycle 1 succeeds in both tasks, cycle 2 in one.
+            episode(0, &[true, true], &[0.1, 0.1], false),
+            episode(0, &[true, false], &[0.1, 0.5], true),
+            // Seed 1: nothing succeeds.
+            episode(1, &[false, false], &[1.0, 2.0], true),
+            episode(1, &[false, false], &[1.0, 2.0], true),
+        ];
+        let t = summarize(&eps);
+        assert_eq!(t.seeds, vec![0, 1]);
+        assert!((t.success[0].mean - 0.5).abs() < 1e-12);
+        assert!((t.success[0].std - (0.5f64).sqrt()).abs() < 1e-12);
+        assert!((t.success[1].mean - 0.25).abs() < 1e-12);
+        assert!((t.success_all.mean - 0.25).abs() < 1e-12);
+        assert!((t.dist[1].mean - (0.3 + 2.0) / 2.0).abs() < 1e-6);
+        assert!((t.fall_rate.mean - 0.75).abs() < 1e-12);
+        let flat = t.flat();
+        for key in ["success_1", "success_2", "success_all", "dist_1", "dist_2"] {
+            assert!(flat.contains_key(key), "{key}");
+        }
+        let md = t.markdown("T1");
+        assert!(
+            md.contains("| T1 | 50.0 ± 70.7 | 25.0 ± 35.4 | 25.0 ± 35.4 |"),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn tasks_with_fewer_pairs_do_not_count_towards_later_cycles() {
+        let eps = [
+            episode(0, &[true], &[0.1], false),
+            episode(0, &[true, true, false], &[0.1, 0.1, 0.9], false),
+        ];
+        let t = summarize(&eps);
+        assert_eq!(t.success.len(), 3);
+        assert_eq!(t.success[0].mean, 1.0);
+        assert_eq!(t.success[2].mean, 0.0);
+        assert_eq!(t.success_all.mean, 0.5);
+        let csv = episodes_csv(&eps);
+        assert!(csv.starts_with(
+            "task_id,seed,steps,fell,physics_invalid,success_1,success_2,success_3,dist_1"
+        ));
+        assert!(csv.contains("t0,0,10,0,0,1,,,0.1000,,\n"), "{csv}");
+    }
+
+    #[test]
+    fn an_untrained_policy_is_scored_on_every_pair_deterministically_in_job_order() {
+        let bench = lhm_scenes::Benchmark::embedded().unwrap();
+        let model = CharacterModel::amp_humanoid();
+        let mut env = EnvConfig::default();
+        env.switching.max_cycle_steps = 8;
+        let sim = SimConfig::default();
+        let ac = ActorCritic::new(
+            TaskEnv::obs_dim(&model, &env),
+            model.dofs.len(),
+            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
+        )
+        .unwrap();
+        let tasks = &bench.tasks(lhm_scenes::Split::Unseen)[..2];
+        let jobs: Vec<(Task, u64)> = tasks
+            .iter()
+            .flat_map(|t| [(t.clone(), 0), (t.clone(), 1)])
+            .collect();
+        let seen = std::sync::atomic::AtomicUsize::new(0);
+        let run = || {
+            let setup = EvalSetup {
+                model: &model,
+                catalogue: &bench.catalogue,
+                sim: &sim,
+                env: &env,
+                batch: 3,
+            };
+            evaluate(&ac, &setup, &jobs, &|n| {
+                seen.store(n, std::sync::atomic::Ordering::Relaxed)
+            })
+            .unwrap()
+        };
+        let first = run();
+        assert_eq!(seen.load(std::sync::atomic::Ordering::Relaxed), jobs.len());
+        assert_eq!(first.len(), jobs.len());
+        for (e, (task, seed)) in first.iter().zip(&jobs) {
+            assert_eq!((&e.task_id, e.seed), (&task.id, *seed));
+            assert_eq!(e.success.len(), task.sequence.len());
+            assert_eq!(e.dist.len(), task.sequence.len());
+            // Nothing was carried: every object is still where it started, off its goal.
+            assert!(e.success.iter().all(|s| !s), "{e:?}");
+            assert!(e.dist.iter().all(|d| *d > 0.2), "{e:?}");
+            // Each cycle's time limit is 8 steps: the episode ends by then (or by a fall).
+            assert!(e.steps <= 2 * 8 + 1 || e.fell, "{e:?}");
+        }
+        assert_eq!(run(), first, "deterministic");
+    }
+
+    #[test]
+    fn seed_zero_is_the_task_and_other_seeds_turn_the_start_within_the_jitter() {
+        let bench = lhm_scenes::Benchmark::embedded().unwrap();
+        let task = bench.tasks(lhm_scenes::Split::Unseen)[0].clone();
+        assert_eq!(seeded_task(&task, 0), task);
+        let a = seeded_task(&task, 1);
+        let b = seeded_task(&task, 2);
+        assert_ne!(a.start.yaw, b.start.yaw);
+        for t in [&a, &b] {
+            assert!((t.start.yaw - task.start.yaw).abs() <= START_YAW_JITTER);
+            assert_eq!(t.start.pos, task.start.pos);
+        }
+        assert_eq!(seeded_task(&task, 1), a, "deterministic");
+    }
+}

@@ -1,0 +1,165 @@
+//! `lhm eval`: a policy's deterministic actions on every task of a split, the paper's metrics per
+//! cycle, mean ± std over seeds (the work is `lhm_actor::eval`).
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use lhm_actor::eval::{episodes_csv, evaluate, summarize, EvalSetup, START_YAW_JITTER};
+use lhm_learner::service::TrainConfig;
+use lhm_scenes::{Benchmark, Split, Task};
+use lhm_sim::CharacterModel;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct EvalArgs {
+    /// A learner checkpoint (`runs/<run>/checkpoint` or `runs/<run>/policy`).
+    #[arg(long)]
+    policy: PathBuf,
+    /// `train` (350 two-object tasks), `unseen` (66), `extension` (3-5 objects), or `ext3`,
+    /// `ext4`, `ext5` (the extension tasks with that many objects).
+    #[arg(long, default_value = "unseen")]
+    split: String,
+    /// Seeds per task: seed 0 is the task as specified, later seeds turn the character's start
+    /// heading by up to ±0.2 rad.
+    #[arg(long, default_value_t = 3)]
+    seeds: u64,
+    /// Only each task's first (object, goal) pair (Teacher 1's setting).
+    #[arg(long)]
+    first_pair: bool,
+    /// Only the first N tasks of the split (a quick look).
+    #[arg(long)]
+    limit: Option<usize>,
+    /// The run's training config, if it changed the environment settings.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Print the table's keys as JSON (`success_k`, `dist_k`, `success_all`, `fall_rate`, each
+    /// with `_std`) instead of the Markdown table.
+    #[arg(long)]
+    json: bool,
+    /// Write `episodes.csv` (one line per task and seed), `table.md` and `table.json` here.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Environments stepped in lockstep (one batched forward pass per step).
+    #[arg(long, default_value_t = 64)]
+    batch: usize,
+}
+
+fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
+    let (split, pairs) = match name {
+        "ext3" => (Split::Extension, Some(3)),
+        "ext4" => (Split::Extension, Some(4)),
+        "ext5" => (Split::Extension, Some(5)),
+        other => match Split::parse(other) {
+            Some(s) => (s, None),
+            None => {
+                bail!("--split {other:?}: expected train, unseen, extension, ext3, ext4 or ext5")
+            }
+        },
+    };
+    Ok(bench
+        .tasks(split)
+        .iter()
+        .filter(|t| pairs.is_none_or(|n| t.sequence.len() == n))
+        .cloned()
+        .collect())
+}
+
+pub fn run(a: EvalArgs) -> Result<()> {
+    if a.seeds == 0 {
+        bail!("--seeds must be at least 1");
+    }
+    let bench = Benchmark::embedded()?;
+    let model = CharacterModel::amp_humanoid();
+    let train = match &a.config {
+        Some(path) => TrainConfig::from_toml_file(path)?,
+        None => TrainConfig::default(),
+    };
+    let learner = crate::render_cmd::load_policy(&a.policy, &train, &model)?;
+    let mut tasks = split_tasks(&bench, &a.split)?;
+    if a.first_pair {
+        tasks = tasks.iter().filter_map(|t| t.single_pair(0)).collect();
+    }
+    if let Some(n) = a.limit {
+        tasks.truncate(n);
+    }
+    if tasks.is_empty() {
+        bail!("--split {}: no tasks", a.split);
+    }
+    let jobs: Vec<(Task, u64)> = tasks
+        .iter()
+        .flat_map(|t| (0..a.seeds).map(move |s| (t.clone(), s)))
+        .collect();
+    let total = jobs.len();
+    let plain = !std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let bar = if plain {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total as u64).with_style(
+            ProgressStyle::with_template("eval {bar:30} {pos}/{len} episodes {elapsed}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        )
+    };
+    let started = std::time::Instant::now();
+    let setup = EvalSetup {
+        model: &model,
+        catalogue: &bench.catalogue,
+        sim: &train.sim,
+        env: &train.env,
+        batch: a.batch,
+    };
+    let episodes = evaluate(&learner.actor_critic, &setup, &jobs, &|done| {
+        bar.set_position(done as u64);
+        if plain {
+            eprintln!("eval: {done}/{total} episodes");
+        }
+    })?;
+    bar.finish_and_clear();
+    let wall = started.elapsed().as_secs_f64();
+    let table = summarize(&episodes);
+    let steps: u64 = episodes.iter().map(|e| u64::from(e.steps)).sum();
+    let method = format!(
+        "{}{}",
+        a.policy.display(),
+        if a.first_pair { " (first pair)" } else { "" }
+    );
+    let markdown = table.markdown(&method);
+    let mut json = serde_json::json!({
+        "split": a.split,
+        "tasks": tasks.len(),
+        "seeds": a.seeds,
+        "episodes": table.episodes,
+        "start_yaw_jitter_rad": START_YAW_JITTER,
+        "wall_s": wall,
+        "episodes_per_s": table.episodes as f64 / wall,
+        "control_steps_per_s": steps as f64 / wall,
+    });
+    if let Some(map) = json.as_object_mut() {
+        for (k, v) in table.flat() {
+            map.insert(k, serde_json::json!(v));
+        }
+    }
+    if let Some(dir) = &a.output {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let write = |name: &str, text: String| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
+        };
+        write("episodes.csv", episodes_csv(&episodes))?;
+        write("table.md", markdown.clone())?;
+        write("table.json", serde_json::to_string_pretty(&json)?)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&json)?);
+    } else {
+        println!(
+            "{} tasks of {} x {} seeds: {} episodes in {wall:.1} s ({:.1} episodes/s)\n",
+            tasks.len(),
+            a.split,
+            a.seeds,
+            table.episodes,
+            table.episodes as f64 / wall
+        );
+        print!("{markdown}");
+    }
+    Ok(())
+}
