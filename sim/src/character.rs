@@ -8,7 +8,7 @@
 //! rotation (target · current⁻¹, from the joint's rotation) added to those coordinates.
 
 use crate::mjcf::{CharacterModel, GeomShape, JointKind};
-use crate::motion::joints::{alternative_angles, range_excess, xyz_angles};
+use crate::motion::joints::{angles_nearest_ranges, range_excess};
 use rapier3d::prelude::*;
 
 /// A 3-DoF joint past one of its ranges is pulled back by an implicit spring of this many times
@@ -375,13 +375,7 @@ fn geom_collider(g: &crate::mjcf::GeomDef, shift: Vector, groups: InteractionGro
 /// angles are clamped into their ranges; `None` when within them. Of the two angle triples that
 /// give `rot`, the one nearer its ranges is read.
 pub fn ball_limit_error(rot: Rotation, ranges: [[f32; 2]; 3]) -> Option<Vector> {
-    let principal = xyz_angles(rot);
-    let other = alternative_angles(principal);
-    let angles = if range_excess(other, ranges) < range_excess(principal, ranges) {
-        other
-    } else {
-        principal
-    };
+    let angles = angles_nearest_ranges(rot, ranges);
     if range_excess(angles, ranges) <= 0.0 {
         return None;
     }

@@ -12,7 +12,7 @@
 //! - `collapse`: servos off through the fall and after: do the joints stay within their ranges.
 
 use crate::mjcf::{CharacterModel, JointKind};
-use crate::motion::joints::{alternative_angles, range_excess, xyz_angles};
+use crate::motion::joints::{angles_nearest_ranges, xyz_angles};
 use crate::obs::{joint_state, twist_angle, BodyState};
 use crate::task::terminations::fall_exempt;
 use crate::world::{SimConfig, World};
@@ -117,8 +117,12 @@ fn time_key(t: f32) -> String {
 }
 
 /// Every actuated DoF's angle (radians, model order) from body states: hinges by their twist,
-/// 3-DoF joints as the x-y-z angles whose Rx·Ry·Rz is the joint rotation.
-pub fn joint_angles(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
+/// 3-DoF joints as the angle triple `ball` reads from the joint rotation and the joint's DoFs.
+fn dof_angles(
+    model: &CharacterModel,
+    bodies: &[BodyState],
+    ball: impl Fn(Rotation, &[usize; 3]) -> [f32; 3],
+) -> Vec<f32> {
     let mut out = vec![0.0; model.dofs.len()];
     for (i, body) in model.bodies.iter().enumerate() {
         let Some(p) = body.parent else { continue };
@@ -129,7 +133,7 @@ pub fn joint_angles(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
                 out[*dof] = twist_angle(rel, axis);
             }
             JointKind::Ball { dofs } => {
-                let a = xyz_angles(rel);
+                let a = ball(rel, dofs);
                 for k in 0..3 {
                     out[dofs[k]] = a[k];
                 }
@@ -140,37 +144,26 @@ pub fn joint_angles(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
     out
 }
 
+/// Every actuated DoF's angle (radians, model order) from body states: hinges by their twist,
+/// 3-DoF joints as the x-y-z angles whose Rx·Ry·Rz is the joint rotation.
+pub fn joint_angles(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
+    dof_angles(model, bodies, |rel, _| xyz_angles(rel))
+}
+
 /// How far (radians, ≥ 0) each actuated DoF's angle lies outside its range, model order. A 3-DoF
 /// joint is read as the x-y-z angle triple nearer its ranges (two triples give each rotation).
 pub fn limit_excess(model: &CharacterModel, bodies: &[BodyState]) -> Vec<f32> {
-    let excess = |x: f32, [lo, hi]: [f32; 2]| (lo - x).max(x - hi).max(0.0);
     let range = |d: usize| model.dofs[d].range.map(|r| r as f32);
-    let mut out = vec![0.0; model.dofs.len()];
-    for (i, body) in model.bodies.iter().enumerate() {
-        let Some(p) = body.parent else { continue };
-        let (rel, _) = joint_state(&bodies[p], &bodies[i]);
-        match &body.joint {
-            JointKind::Hinge { dof } => {
-                let axis = Vector::from_array(model.dofs[*dof].axis.map(|a| a as f32));
-                out[*dof] = excess(twist_angle(rel, axis), range(*dof));
-            }
-            JointKind::Ball { dofs } => {
-                let ranges = dofs.map(range);
-                let principal = xyz_angles(rel);
-                let other = alternative_angles(principal);
-                let angles = if range_excess(other, ranges) < range_excess(principal, ranges) {
-                    other
-                } else {
-                    principal
-                };
-                for k in 0..3 {
-                    out[dofs[k]] = excess(angles[k], ranges[k]);
-                }
-            }
-            JointKind::Free | JointKind::Fixed => {}
-        }
-    }
-    out
+    dof_angles(model, bodies, |rel, dofs| {
+        angles_nearest_ranges(rel, dofs.map(range))
+    })
+    .into_iter()
+    .enumerate()
+    .map(|(d, x)| {
+        let [lo, hi] = range(d);
+        (lo - x).max(x - hi).max(0.0)
+    })
+    .collect()
 }
 
 /// Total normal force (N) of the floor's contacts in the last pipeline step, whether each foot

@@ -142,6 +142,17 @@ pub fn alternative_angles([a, b, c]: [f32; 3]) -> [f32; 3] {
     [wrap(a + PI), wrap(PI - b), wrap(c + PI)]
 }
 
+/// The x-y-z angles of `r` (of the two triples that give it) nearer `ranges`.
+pub fn angles_nearest_ranges(r: Rotation, ranges: [[f32; 2]; 3]) -> [f32; 3] {
+    let principal = xyz_angles(r);
+    let other = alternative_angles(principal);
+    if range_excess(other, ranges) < range_excess(principal, ranges) {
+        other
+    } else {
+        principal
+    }
+}
+
 /// How far `angles` lie outside `ranges`, summed (0 within them).
 pub fn range_excess(angles: [f32; 3], ranges: [[f32; 2]; 3]) -> f32 {
     angles
