@@ -234,27 +234,19 @@ impl Learner {
             meta.ppo_adam_step,
         )?;
         learner.ppo.rng = meta.ppo_rng.clone();
-        if meta.obs_norm.as_ref().map(RunningMeanStd::dim)
-            != learner
-                .actor_critic
-                .obs_norm
-                .as_ref()
-                .map(RunningMeanStd::dim)
-        {
+        // A stored normaliser must match the configured one in presence and width.
+        let same_shape = |stored: &Option<RunningMeanStd>, built: &Option<RunningMeanStd>| {
+            stored.as_ref().map(RunningMeanStd::dim) == built.as_ref().map(RunningMeanStd::dim)
+        };
+        if !same_shape(&meta.obs_norm, &learner.actor_critic.obs_norm) {
             return Err(
                 mismatch("observation normaliser missing or of the wrong width".into()).into(),
             );
         }
-        learner.actor_critic.obs_norm = meta.obs_norm.clone();
-        if meta.value_norm.as_ref().map(RunningMeanStd::dim)
-            != learner
-                .actor_critic
-                .value_norm
-                .as_ref()
-                .map(RunningMeanStd::dim)
-        {
+        if !same_shape(&meta.value_norm, &learner.actor_critic.value_norm) {
             return Err(mismatch("value normaliser missing or of the wrong width".into()).into());
         }
+        learner.actor_critic.obs_norm = meta.obs_norm.clone();
         learner.actor_critic.value_norm = meta.value_norm.clone();
 
         match (&mut learner.amp, &meta.amp) {
