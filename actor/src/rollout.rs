@@ -7,12 +7,22 @@
 //! environment on a newly drawn task inside the same chunk; `dones`/`truncated` mark the seam.
 //! A step on which the physics guard tripped poisons its environment's chunk: that chunk is
 //! never sent, so its data can never reach an update.
+//!
+//! Teacher 2's rollouts (role `teacher2`) start where Teacher 1 ends, with no reset: each new
+//! episode is a two-or-more-object task on which the frozen Teacher 1 first runs its first pair
+//! (mean actions) until the cycle switch hands off; only then does the environment join the
+//! batch, so every step in a chunk is Teacher 2's and Teacher 1's steps are simulation cost
+//! ([`Rollout::teacher1_steps`]). A Teacher 1 that falls (or whose episode ends otherwise)
+//! leaves no state Teacher 2 could start from in a reset-free episode: that episode is dropped
+//! and another drawn. A cycle that times out unplaced still hands off, as at evaluation, where
+//! the same switch hands Teacher 2 whatever Teacher 1 left.
 
 use lhm_nets::{ActorCritic, SplitMix64};
 use lhm_protos::{EpisodeStats, Role, TrajectoryChunk, WireMessage};
 use lhm_scenes::{Benchmark, Catalogue, Task};
 use lhm_sim::env::TaskEnv;
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::task::cycles::Handoff;
 use lhm_sim::CharacterModel;
 
 use lhm_cluster::RunSpec;
@@ -25,7 +35,47 @@ pub enum RolloutError {
     Spec(String),
     #[error(transparent)]
     Net(#[from] lhm_nets::NetError),
+    #[error("Teacher 1 completed no first cycle in {0} episodes in a row (it fell or its episode ended each time): train it further before Teacher 2")]
+    Teacher1Fails(u32),
 }
+
+/// How Teacher 1's run on the first pair of an episode ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FirstCycleEnd {
+    /// The cycle switch handed off to the second pair: the state Teacher 2 starts from.
+    HandedOff,
+    /// The character fell.
+    Fell,
+    /// The episode ended otherwise (physics guard, time limit, no second pair).
+    Ended,
+}
+
+/// Runs `policy` (mean actions) on `env`'s current pair until the cycle switch; returns the
+/// control steps taken and how it ended. The environment is left exactly where it stopped.
+pub fn run_first_cycle(
+    env: &mut TaskEnv,
+    policy: &ActorCritic,
+) -> Result<(u32, FirstCycleEnd), lhm_nets::NetError> {
+    let mut steps = 0u32;
+    loop {
+        let action = policy.act_deterministic(&env.observation())?;
+        let r = env.step(&action);
+        steps += 1;
+        if r.fell {
+            return Ok((steps, FirstCycleEnd::Fell));
+        }
+        if r.handoff == Handoff::Next {
+            return Ok((steps, FirstCycleEnd::HandedOff));
+        }
+        if r.done || r.truncated || r.physics_invalid {
+            return Ok((steps, FirstCycleEnd::Ended));
+        }
+    }
+}
+
+/// Teacher 1 episodes in a row without a handoff before the rollout gives up with an error
+/// (instead of spinning on a Teacher 1 that cannot do its cycle).
+const TEACHER1_TRIES: u32 = 200;
 
 /// Per-environment chunk buffers.
 #[derive(Default)]
@@ -84,6 +134,12 @@ pub struct Rollout {
     policy_version: u64,
     /// Reference motion for demo starts (loaded when the run spec asks for them).
     demo: Option<DemoMotion>,
+    /// Teacher 2's rollouts: the frozen Teacher 1 that plays each episode's first pair.
+    teacher1: Option<ActorCritic>,
+    /// Control steps Teacher 1 took (simulation cost of Teacher 2's starts).
+    pub teacher1_steps: u64,
+    /// Teacher 1 episodes dropped because they did not hand off.
+    pub teacher1_failures: u64,
 }
 
 impl Rollout {
@@ -96,8 +152,53 @@ impl Rollout {
         num_envs: usize,
         seed: u64,
     ) -> Result<Self, RolloutError> {
+        Self::with_teacher1(spec, bench, run_id, actor_id, role, num_envs, seed, None)
+    }
+
+    /// A rollout whose episodes start after `teacher1`'s first cycle (role `teacher2`, which
+    /// requires it).
+    #[allow(clippy::too_many_arguments)]
+    pub fn with_teacher1(
+        spec: RunSpec,
+        bench: &Benchmark,
+        run_id: &str,
+        actor_id: &str,
+        role: Role,
+        num_envs: usize,
+        seed: u64,
+        teacher1: Option<ActorCritic>,
+    ) -> Result<Self, RolloutError> {
         let model = CharacterModel::amp_humanoid();
-        let tasks = spec.tasks.resolve(bench).map_err(RolloutError::Spec)?;
+        let mut tasks = spec.tasks.resolve(bench).map_err(RolloutError::Spec)?;
+        match (role, &teacher1) {
+            (Role::Teacher2, None) => {
+                return Err(RolloutError::Spec(
+                    "a teacher2 rollout needs Teacher 1's policy for each episode's first pair"
+                        .into(),
+                ))
+            }
+            (_, Some(t1)) => {
+                if t1.obs_dim() != TaskEnv::obs_dim(&model, &spec.env)
+                    || t1.act_dim() != model.dofs.len()
+                {
+                    return Err(RolloutError::Spec(format!(
+                        "Teacher 1 takes {} observations and gives {} actions; this environment has {} and {}",
+                        t1.obs_dim(),
+                        t1.act_dim(),
+                        TaskEnv::obs_dim(&model, &spec.env),
+                        model.dofs.len()
+                    )));
+                }
+                tasks.retain(|t| t.sequence.len() >= 2);
+                if tasks.is_empty() {
+                    return Err(RolloutError::Spec(
+                        "Teacher 2 needs tasks of two or more objects; the task set has none"
+                            .into(),
+                    ));
+                }
+            }
+            _ => {}
+        }
         let obs_dim = TaskEnv::obs_dim(&model, &spec.env);
         let amp_dim = TaskEnv::amp_dim(&model, &spec.env);
         if obs_dim != spec.obs_dim {
@@ -151,9 +252,12 @@ impl Rollout {
             policy_version: 0,
             demo,
             spec,
+            teacher1,
+            teacher1_steps: 0,
+            teacher1_failures: 0,
         };
         for _ in 0..num_envs.max(1) {
-            let env = rollout.fresh_env();
+            let env = rollout.fresh_env()?;
             let obs = env.observation();
             rollout.slots.push(Slot {
                 env,
@@ -188,9 +292,44 @@ impl Rollout {
         self.slots.len()
     }
 
+    /// The next episode's environment: after Teacher 1's first cycle for Teacher 2, else
+    /// [`Self::fresh_start`].
+    fn fresh_env(&mut self) -> Result<TaskEnv, RolloutError> {
+        let Some(teacher1) = self.teacher1.take() else {
+            return Ok(self.fresh_start());
+        };
+        let env = self.after_teacher1(&teacher1);
+        self.teacher1 = Some(teacher1);
+        env
+    }
+
+    /// A task from its start pose, played by `teacher1` up to the handoff to its second pair
+    /// (no demo starts: Teacher 2's starts are Teacher 1's terminal states).
+    fn after_teacher1(&mut self, teacher1: &ActorCritic) -> Result<TaskEnv, RolloutError> {
+        for _ in 0..TEACHER1_TRIES {
+            let task = &self.tasks[self.rng.below(self.tasks.len())];
+            let mut env = TaskEnv::new(
+                &self.model,
+                task,
+                &self.catalogue,
+                self.spec.sim.clone(),
+                self.spec.env.clone(),
+            );
+            let (steps, end) = run_first_cycle(&mut env, teacher1)?;
+            self.teacher1_steps += u64::from(steps);
+            if end == FirstCycleEnd::HandedOff {
+                // "Reached" is Teacher 2's statistic: its object, not Teacher 1's.
+                env.reached = false;
+                return Ok(env);
+            }
+            self.teacher1_failures += 1;
+        }
+        Err(RolloutError::Teacher1Fails(TEACHER1_TRIES))
+    }
+
     /// An environment on a task drawn uniformly from the task set, started from a reference
     /// motion frame with the run's demo-start probability.
-    fn fresh_env(&mut self) -> TaskEnv {
+    fn fresh_start(&mut self) -> TaskEnv {
         let task = &self.tasks[self.rng.below(self.tasks.len())];
         let mut env = TaskEnv::new(
             &self.model,
@@ -312,7 +451,7 @@ impl Rollout {
         // New episodes for the environments that ended.
         let ended: Vec<usize> = out.finished.iter().map(|(i, _)| *i).collect();
         for i in ended {
-            let env = self.fresh_env();
+            let env = self.fresh_env()?;
             let slot = &mut self.slots[i];
             slot.obs = env.observation();
             slot.env = env;

@@ -120,6 +120,20 @@ fn wait_for_newer(
     None
 }
 
+/// The frozen Teacher 1 a Teacher 2 learner serves on the run's `teacher1` policy key.
+fn fetch_teacher1(session: &zenoh::Session, run_id: &str) -> Result<ReceivedPolicy, ActorError> {
+    let key = keys::policy(run_id, Role::Teacher1);
+    tracing::info!("waiting for Teacher 1's weights on {key}");
+    loop {
+        if shutdown::requested() {
+            return Err(ActorError::NoWeights);
+        }
+        if let Some(p) = query_latest(session, &key)? {
+            return Ok(p);
+        }
+    }
+}
+
 pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
     keys::check_chunk("run id", &config.run_id).map_err(ClusterError::from)?;
     keys::check_chunk("actor id", &config.actor_id).map_err(ClusterError::from)?;
@@ -165,7 +179,12 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
         policy.version,
         config.envs
     );
-    let mut rollout = Rollout::new(
+    let teacher1 = if config.role == Role::Teacher2 {
+        Some(fetch_teacher1(&session, &config.run_id)?.actor_critic)
+    } else {
+        None
+    };
+    let mut rollout = Rollout::with_teacher1(
         policy.spec.clone(),
         &bench,
         &config.run_id,
@@ -173,6 +192,7 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
         config.role,
         config.envs,
         config.seed,
+        teacher1,
     )?;
     let traj = session
         .declare_publisher(keys::trajectory(
@@ -276,6 +296,13 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
             );
             m.values
                 .insert("chunks_sent".into(), summary.chunks_sent as f64);
+            if config.role == Role::Teacher2 {
+                // Teacher 1's share of the simulation, and its episodes dropped for a fall.
+                m.values
+                    .insert("teacher1_steps".into(), rollout.teacher1_steps as f64);
+                m.values
+                    .insert("teacher1_failures".into(), rollout.teacher1_failures as f64);
+            }
             if let Ok(bytes) = m.encode_checked() {
                 // Telemetry may be dropped under congestion; training data may not.
                 let _ = session

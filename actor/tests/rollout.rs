@@ -84,3 +84,101 @@ fn a_spec_that_does_not_fit_the_environment_is_refused() {
         .unwrap();
     assert!(err.to_string().contains("observations"), "{err}");
 }
+
+/// Teacher 2 starts where Teacher 1 stopped: every environment of a teacher2 rollout is a
+/// two-object task that Teacher 1 (mean actions) played up to the cycle switch, and replaying
+/// that first cycle on a fresh copy of the task reaches exactly the same world, observation and
+/// AMP history as the state Teacher 2's first chunk step records. No reset in between.
+#[test]
+fn teacher2_starts_from_teacher1s_last_state() {
+    use lhm_actor::rollout::{run_first_cycle, FirstCycleEnd};
+    let bench = Benchmark::embedded().unwrap();
+    let model = CharacterModel::amp_humanoid();
+    let mut env = EnvConfig::default();
+    // A short cycle: Teacher 1 (an untrained policy here) hands off on the timeout.
+    env.switching.max_cycle_steps = 6;
+    let spec = RunSpec {
+        obs_dim: TaskEnv::obs_dim(&model, &env),
+        act_dim: model.dofs.len(),
+        amp_dim: TaskEnv::amp_dim(&model, &env),
+        actor_critic: ActorCriticConfig::with_hidden(&[32]),
+        env,
+        sim: SimConfig::default(),
+        tasks: TaskSet::Ids(vec![
+            "train-0001".into(),
+            "train-0002.p1".into(),
+            "train-0003".into(),
+        ]),
+        chunk_steps: 4,
+        record_every_episodes: 0,
+        chunk_sets_per_version: 0,
+    };
+    let teacher1 = ActorCritic::new(
+        spec.obs_dim,
+        spec.act_dim,
+        &ActorCriticConfig {
+            init_seed: 3,
+            ..ActorCriticConfig::with_hidden(&[16])
+        },
+    )
+    .unwrap();
+    let teacher2 = ActorCritic::new(spec.obs_dim, spec.act_dim, &spec.actor_critic).unwrap();
+    // Without Teacher 1 a teacher2 rollout is refused.
+    let err = Rollout::new(spec.clone(), &bench, "run", "a", Role::Teacher2, 1, 0)
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("Teacher 1"), "{err}");
+
+    let mut rollout = Rollout::with_teacher1(
+        spec.clone(),
+        &bench,
+        "run",
+        "a",
+        Role::Teacher2,
+        3,
+        11,
+        Some(teacher1.clone()),
+    )
+    .unwrap();
+    assert_eq!(
+        rollout.teacher1_steps,
+        3 * 6,
+        "three first cycles of 6 steps"
+    );
+    for i in 0..rollout.num_envs() {
+        let env = rollout.env(i);
+        // The single-object task cannot host Teacher 2.
+        assert_ne!(env.task.id, "train-0002.p1");
+        assert_eq!(env.cycles.current, 1, "on the second pair");
+        assert_eq!(env.steps(), 6);
+        // The same task replayed from its start with the same Teacher 1.
+        let task = bench.task(&env.task.id).unwrap().1;
+        let mut replay = TaskEnv::new(
+            &model,
+            &task,
+            &bench.catalogue,
+            spec.sim.clone(),
+            spec.env.clone(),
+        );
+        let (steps, end) = run_first_cycle(&mut replay, &teacher1).unwrap();
+        assert_eq!((steps, end), (6, FirstCycleEnd::HandedOff));
+        assert_eq!(replay.world.body_states(), env.world.body_states());
+        assert_eq!(replay.observation(), env.observation());
+        assert_eq!(replay.amp_features(), env.amp_features());
+    }
+    // Teacher 2's first chunk step records exactly that state.
+    let first_obs: Vec<Vec<f32>> = (0..3).map(|i| rollout.env(i).observation()).collect();
+    let mut chunks = Vec::new();
+    for _ in 0..4 {
+        chunks.extend(rollout.step(&teacher2, 1).unwrap().chunks);
+    }
+    assert_eq!(chunks.len(), 3);
+    for c in &chunks {
+        let obs_dim = spec.obs_dim;
+        assert_eq!(
+            c.observations[..obs_dim],
+            first_obs[c.env_index as usize][..]
+        );
+        assert_eq!(c.role, Role::Teacher2 as i32);
+    }
+}

@@ -34,6 +34,16 @@ pub struct LearnerOpts {
     /// Train with the task reward only (no AMP discriminator, no motion clips needed).
     #[arg(long)]
     no_amp: bool,
+    /// Train Teacher 2 from this Teacher 1 policy's terminal states (a checkpoint stem such as
+    /// runs/p/t1/policy): sets the role to teacher2 and, unless the config lists tasks, the task
+    /// set to the two-object training tasks.
+    #[arg(long)]
+    teacher1: Option<PathBuf>,
+    /// Start a new run from this checkpoint's policy, value function and normalisers (fine-tuning,
+    /// e.g. release-and-retreat from runs/p/t1/policy); a run with its own checkpoint resumes
+    /// from that instead.
+    #[arg(long)]
+    init_from: Option<PathBuf>,
     /// Where `scripts/install-motions` put the clips (default: $LHM_MOTION_DIR or ~/.cache/lhm/motions).
     #[arg(long)]
     motion_dir: Option<PathBuf>,
@@ -62,6 +72,16 @@ impl LearnerOpts {
         }
         if self.no_amp {
             config.amp_enabled = false;
+        }
+        if let Some(path) = &self.init_from {
+            config.init_from = Some(path.clone());
+        }
+        if let Some(path) = &self.teacher1 {
+            config.teacher1 = Some(path.clone());
+            config.role = "teacher2".into();
+            if config.tasks == lhm_cluster::TaskSet::TrainSingleObject {
+                config.tasks = lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train);
+            }
         }
         keys::check_chunk("run id", &config.run_id)?;
         Ok(config)
@@ -245,8 +265,12 @@ pub fn train(args: TrainArgs) -> Result<()> {
     let result = run_with_progress(&config, &endpoints, demo, || {
         for i in 0..actors {
             let log = run_dir.join(format!("actor-{i}.log"));
-            let spawned = std::fs::File::create(&log)
-                .with_context(|| format!("creating {}", log.display()))
+            // Appended, not truncated: a resumed run keeps the logs of its earlier sessions.
+            let spawned = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&log)
+                .with_context(|| format!("opening {}", log.display()))
                 .and_then(|file| {
                     let err = file.try_clone()?;
                     let mut cmd = Command::new(&exe);

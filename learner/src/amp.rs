@@ -35,6 +35,11 @@ pub struct AmpConfig {
     pub task_reward_weight: f64,
     pub style_reward_weight: f64,
     pub seed: u64,
+    /// HumanVLA's cap: each step's style reward is cut to at most max(task reward, this), so
+    /// style cannot pay more than the task once the task pays. `None` (absent from a config
+    /// file): no cap.
+    #[serde(default)]
+    pub style_cap_floor: Option<f64>,
 }
 
 impl Default for AmpConfig {
@@ -60,6 +65,7 @@ impl Default for AmpConfig {
             task_reward_weight: 0.5,
             style_reward_weight: 0.5,
             seed: 0,
+            style_cap_floor: None,
         }
     }
 }
@@ -274,17 +280,23 @@ impl AmpTrainer {
             .collect())
     }
 
-    /// r = w_task · r_task + w_style · r_style, elementwise.
+    /// r = w_task · r_task + w_style · r_style, elementwise (with `style_cap_floor` = c,
+    /// r_style is first cut to min(r_style, max(r_task, c))).
     pub fn combine_rewards(&self, task: &[f32], style: &[f32]) -> LearnerResult<Vec<f32>> {
         crate::error::check_len("style rewards", style.len(), task.len())?;
         let (wt, ws) = (
             self.config.task_reward_weight,
             self.config.style_reward_weight,
         );
+        let cap = self.config.style_cap_floor;
         Ok(task
             .iter()
             .zip(style)
-            .map(|(&t, &s)| (wt * t as f64 + ws * s as f64) as f32)
+            .map(|(&t, &s)| {
+                let (t, s) = (t as f64, s as f64);
+                let s = cap.map_or(s, |c| s.min(t.max(c)));
+                (wt * t + ws * s) as f32
+            })
             .collect())
     }
 
@@ -489,6 +501,16 @@ mod tests {
         assert!((style_reward_from_logit(0.0, 1.0) - 2f32.ln()).abs() < 1e-6);
         let combined = trainer.combine_rewards(&[1.0, 0.0], &[0.0, 4.0]).unwrap();
         assert_eq!(combined, vec![0.5, 2.0]);
+        // HumanVLA's cap: style ≤ max(task, 0.4).
+        let mut capped = trainer.clone();
+        capped.config.style_cap_floor = Some(0.4);
+        let combined = capped
+            .combine_rewards(&[1.0, 0.0, 0.2, 2.0], &[0.0, 4.0, 0.3, 3.0])
+            .unwrap();
+        let expected = [0.5, 0.2, 0.25, 2.0];
+        for (c, e) in combined.iter().zip(expected) {
+            assert!((c - e).abs() < 1e-6, "{combined:?}");
+        }
     }
 
     /// Penalty P(W) = mean_b ‖∇ₓD(x_b)‖²; its gradient w.r.t. the first-layer weights by candle's

@@ -32,6 +32,12 @@ pub struct PpoConfig {
     pub normalize_advantages: bool,
     /// Seed of the minibatch shuffle.
     pub seed: u64,
+    /// KL-adaptive learning rate (rl_games' `lr_schedule: adaptive`, `kl_threshold`): after each
+    /// epoch, the Adam learning rate is divided by 1.5 when the epoch's mean approx-KL is above
+    /// twice this, and multiplied by 1.5 when below half of it, within [1e-6, 1e-2]. `None`
+    /// (absent from a config file): a constant rate, as IsaacGymEnvs' HumanoidAMP trains.
+    #[serde(default)]
+    pub kl_target: Option<f64>,
 }
 
 impl Default for PpoConfig {
@@ -54,7 +60,21 @@ impl Default for PpoConfig {
             minibatch_size: 4096,
             normalize_advantages: true,
             seed: 0,
+            kl_target: None,
         }
+    }
+}
+
+/// The learning rate after an epoch whose mean approx-KL was `kl` (rl_games' adaptive rule).
+pub fn adapt_lr(lr: f64, kl: f64, target: f64) -> f64 {
+    const MIN_LR: f64 = 1e-6;
+    const MAX_LR: f64 = 1e-2;
+    if kl > 2.0 * target {
+        (lr / 1.5).max(MIN_LR)
+    } else if kl < 0.5 * target {
+        (lr * 1.5).min(MAX_LR)
+    } else {
+        lr
     }
 }
 
@@ -95,6 +115,8 @@ pub struct PpoStats {
     /// Global gradient norm before clipping.
     pub grad_norm: f64,
     pub minibatches: usize,
+    /// The learning rate after the update (changes only with `kl_target`).
+    pub lr: f64,
 }
 
 /// The PPO optimiser state: Adam over the actor-critic's parameters and the shuffle RNG.
@@ -225,6 +247,7 @@ impl PpoTrainer {
         let vars: Vec<Var> = named.iter().map(|(_, v)| v.clone()).collect();
         let mut sums = PpoStats::default();
         for _ in 0..self.config.epochs {
+            let (kl_before, minibatches_before) = (sums.approx_kl, sums.minibatches);
             let order = self.rng.permutation(n);
             for chunk in order.chunks(mb_size) {
                 let mb = PpoMinibatch {
@@ -258,6 +281,11 @@ impl PpoTrainer {
                 sums.total_loss += scalar(&losses.total)?;
                 sums.minibatches += 1;
             }
+            if let Some(target) = self.config.kl_target {
+                let epoch_kl = (sums.approx_kl - kl_before)
+                    / (sums.minibatches - minibatches_before).max(1) as f64;
+                self.adam.config.lr = adapt_lr(self.adam.config.lr, epoch_kl, target);
+            }
         }
         if let Some(norm) = &mut ac.obs_norm {
             norm.update(&batch.obs)?;
@@ -273,6 +301,7 @@ impl PpoTrainer {
             approx_kl: sums.approx_kl / k,
             grad_norm: sums.grad_norm / k,
             minibatches: sums.minibatches,
+            lr: self.adam.config.lr,
         })
     }
 }
@@ -359,5 +388,53 @@ mod tests {
             "normalised critic reads {normalised}"
         );
         assert!(raw.abs() < 10.0, "raw critic reads {raw}");
+    }
+
+    #[test]
+    fn the_adaptive_rate_follows_the_rl_games_rule() {
+        let target = 0.008;
+        assert_eq!(adapt_lr(3e-4, 0.02, target), 3e-4 / 1.5);
+        assert_eq!(adapt_lr(3e-4, 0.001, target), 3e-4 * 1.5);
+        assert_eq!(adapt_lr(3e-4, 0.008, target), 3e-4);
+        assert_eq!(adapt_lr(1e-6, 1.0, target), 1e-6);
+        assert_eq!(adapt_lr(1e-2, 0.0, target), 1e-2);
+    }
+
+    /// With a KL target far below what an update moves, every epoch divides the rate by 1.5;
+    /// far above, every epoch multiplies it; without a target it stays.
+    #[test]
+    fn a_kl_target_moves_the_learning_rate_epoch_by_epoch() {
+        let (obs_dim, act_dim, n) = (4, 2, 128);
+        let mut rng = SplitMix64::new(3);
+        let obs: Vec<f32> = (0..n * obs_dim)
+            .map(|_| rng.uniform(-1.0, 1.0) as f32)
+            .collect();
+        let lr_after = |kl_target: Option<f64>| {
+            let mut ac =
+                ActorCritic::new(obs_dim, act_dim, &ActorCriticConfig::with_hidden(&[16])).unwrap();
+            let act = ac.act(&obs, &mut SplitMix64::new(4)).unwrap();
+            let batch = PpoBatch {
+                obs: obs.clone(),
+                actions: act.actions,
+                old_log_probs: act.log_probs,
+                old_values: act.values.clone(),
+                advantages: (0..n).map(|i| (i % 7) as f32 - 3.0).collect(),
+                returns: vec![1.0; n],
+            };
+            let config = PpoConfig {
+                epochs: 3,
+                minibatch_size: 32,
+                kl_target,
+                ..PpoConfig::default()
+            };
+            let lr = config.adam.lr;
+            let mut trainer = PpoTrainer::new(config, &ac).unwrap();
+            let stats = trainer.update(&mut ac, &batch).unwrap();
+            assert_eq!(stats.lr, trainer.adam.config.lr);
+            stats.lr / lr
+        };
+        assert!((lr_after(Some(1e-12)) - 1.5f64.powi(-3)).abs() < 1e-9);
+        assert!((lr_after(Some(1e3)) - 1.5f64.powi(3)).abs() < 1e-9);
+        assert_eq!(lr_after(None), 1.0);
     }
 }

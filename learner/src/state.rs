@@ -69,6 +69,10 @@ struct LearnerMeta {
     value_norm: Option<RunningMeanStd>,
     ppo_adam_step: u64,
     ppo_rng: SplitMix64,
+    /// The PPO learning rate now (differs from the configured one under `kl_target`); absent
+    /// in older checkpoints, which had a constant rate.
+    #[serde(default)]
+    ppo_lr: Option<f64>,
     amp: Option<AmpMeta>,
 }
 
@@ -173,6 +177,7 @@ impl Learner {
             value_norm: self.actor_critic.value_norm.clone(),
             ppo_adam_step: self.ppo.adam.step_count(),
             ppo_rng: self.ppo.rng.clone(),
+            ppo_lr: Some(self.ppo.adam.config.lr),
             amp: self.amp.as_ref().map(|amp| AmpMeta {
                 adam_step: amp.adam.step_count(),
                 rng: amp.rng.clone(),
@@ -234,6 +239,9 @@ impl Learner {
             meta.ppo_adam_step,
         )?;
         learner.ppo.rng = meta.ppo_rng.clone();
+        if let Some(lr) = meta.ppo_lr {
+            learner.ppo.adam.config.lr = lr;
+        }
         // A stored normaliser must match the configured one in presence and width.
         let same_shape = |stored: &Option<RunningMeanStd>, built: &Option<RunningMeanStd>| {
             stored.as_ref().map(RunningMeanStd::dim) == built.as_ref().map(RunningMeanStd::dim)

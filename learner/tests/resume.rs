@@ -137,8 +137,11 @@ fn resumed_run_matches_uninterrupted_run_bit_for_bit() {
     resumed.save(&dir.join("resumed")).unwrap();
     straight.save(&dir.join("straight")).unwrap();
     let read = |name: &str| std::fs::read(dir.join(name)).unwrap();
+    let tensors = |stem: &str| {
+        std::fs::read(lhm_nets::checkpoint::committed_weights(&dir.join(stem)).unwrap()).unwrap()
+    };
     assert!(
-        read("resumed.safetensors") == read("straight.safetensors"),
+        tensors("resumed") == tensors("straight"),
         "safetensors files differ"
     );
     // The metadata names its own weights file; everything else must match.
@@ -173,7 +176,7 @@ fn mismatched_or_corrupt_learner_checkpoints_are_refused_with_typed_errors() {
         other => panic!("expected a mismatch error, got {other:?}"),
     }
 
-    let weights = dir.join("c.safetensors");
+    let weights = lhm_nets::checkpoint::committed_weights(&stem).unwrap();
     let mut bytes = std::fs::read(&weights).unwrap();
     let mid = bytes.len() / 2;
     bytes[mid] ^= 1;
@@ -208,7 +211,7 @@ fn the_policy_alone_loads_and_acts_as_the_full_learner_without_its_amp_state() {
         learner.actor_critic.act_deterministic(&obs).unwrap()
     );
     let size = |stem: &str| {
-        std::fs::metadata(dir.join(format!("{stem}.safetensors")))
+        std::fs::metadata(lhm_nets::checkpoint::committed_weights(&dir.join(stem)).unwrap())
             .unwrap()
             .len()
     };

@@ -1,14 +1,22 @@
-//! Checkpoint files: `<stem>.safetensors` holds every tensor, `<stem>.json` the metadata (format
-//! version, kind, tensor manifest, FNV-1a 64 checksum of the safetensors bytes, and a typed
-//! payload: configs, counters, normaliser statistics, optimiser step counts, RNG states).
+//! Checkpoint files: `<stem>.json` is the manifest (format version, kind, the name of the tensor
+//! file, its FNV-1a 64 checksum and tensor list, and a typed payload: configs, counters,
+//! normaliser statistics, optimiser step counts, RNG states); the tensors are in
+//! `<stem>.<checksum>.safetensors`, the file the manifest's `weights_file` names.
 //!
 //! Tensor names are plain dotted PyTorch-style names (`policy.mean.layers.0.weight`, weights
 //! [out, in]), so a PyTorch user can read the weights with
-//! `safetensors.torch.load_file("<stem>.safetensors")` and load them into an `nn.Linear` stack.
+//! `safetensors.torch.load_file(dir / json.load(open("<stem>.json"))["weights_file"])` and load
+//! them into an `nn.Linear` stack.
 //!
-//! Both files are written atomically (temporary file in the same directory, fsync, rename, fsync
-//! of the directory); the JSON is renamed last, so it is the commit point, and a safetensors
-//! file that does not match it is caught by the checksum.
+//! A save is atomic as a whole. The tensor file gets a name of its own (by checksum), so writing
+//! it never touches the file the current manifest names; the manifest is then replaced by one
+//! rename, the single commit point. A process killed at any moment leaves either the old
+//! checkpoint or the new one, both complete (both files are written to a temporary file,
+//! fsynced, renamed, and the directory fsynced). After the commit, tensor files no manifest
+//! needs any more are deleted, except the previous one (a reader that read the old manifest
+//! just before the commit can still open its tensors), and so are temporary files a killed save
+//! left behind. (Checkpoints of format 1 written before this layout named their tensors
+//! `<stem>.safetensors`; they still load.)
 
 use std::collections::{BTreeMap, HashMap};
 use std::ffi::OsString;
@@ -79,6 +87,8 @@ pub fn fnv1a64(bytes: &[u8]) -> u64 {
 }
 
 /// The two files of the checkpoint at `stem` (`stem` may contain dots; extensions are appended).
+/// `weights` is the tensor file the manifest names once it has been read or written; before
+/// that, the pre-manifest layout's `<stem>.safetensors`.
 #[derive(Debug, Clone)]
 pub struct CheckpointPaths {
     pub weights: PathBuf,
@@ -95,6 +105,80 @@ impl CheckpointPaths {
         Self {
             weights: with(".safetensors"),
             meta: with(".json"),
+        }
+    }
+
+    /// The directory both files live in.
+    fn dir(&self) -> PathBuf {
+        parent_dir(&self.meta)
+    }
+}
+
+fn parent_dir(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
+        _ => PathBuf::from("."),
+    }
+}
+
+fn file_name_of(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// The tensor file of a save whose bytes have checksum `fnv` (16 hex digits).
+fn weights_name(stem_name: &str, fnv: &str) -> String {
+    format!("{stem_name}.{fnv}.safetensors")
+}
+
+/// Whether `name` is one of the files that only this stem's saves write: a tensor file
+/// (`<stem>.<16 hex>.safetensors`, or the earlier layout's `<stem>.safetensors`) or a save's
+/// temporary file (`.<that name or stem.json>.tmp-<pid>`). Another stem that merely shares the
+/// prefix (`checkpoint.v1` beside `checkpoint`) never matches.
+fn is_own_file(stem_name: &str, name: &str) -> bool {
+    fn is_hex16(s: &str) -> bool {
+        s.len() == 16 && s.bytes().all(|b| b.is_ascii_hexdigit())
+    }
+    let tensors = |rest: &str| {
+        rest == "safetensors" || rest.strip_suffix(".safetensors").is_some_and(is_hex16)
+    };
+    if let Some(rest) = name
+        .strip_prefix(stem_name)
+        .and_then(|r| r.strip_prefix('.'))
+    {
+        return tensors(rest);
+    }
+    let Some((file, pid)) = name
+        .strip_prefix('.')
+        .and_then(|r| r.strip_prefix(stem_name))
+        .and_then(|r| r.strip_prefix('.'))
+        .and_then(|r| r.rsplit_once(".tmp-"))
+    else {
+        return false;
+    };
+    !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()) && (file == "json" || tensors(file))
+}
+
+/// Test hook for killing a process at a given point of a save: with
+/// `LHM_CHECKPOINT_FAULT=<point>:<n>`, the n-th time (from 1) this process reaches `<point>` it
+/// aborts on the spot, as a SIGKILL would stop it. Points, in order: `weights-written` (the
+/// tensors' temporary file is complete), `weights-renamed`, `meta-written`, `meta-renamed` (the
+/// commit, before the clean-up).
+fn fault_point(point: &str) {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    use std::sync::OnceLock;
+    static FAULT: OnceLock<Option<(String, u64)>> = OnceLock::new();
+    static SEEN: AtomicU64 = AtomicU64::new(0);
+    let fault = FAULT.get_or_init(|| {
+        let spec = std::env::var("LHM_CHECKPOINT_FAULT").ok()?;
+        let (name, n) = spec.rsplit_once(':')?;
+        Some((name.to_owned(), n.parse().ok()?))
+    });
+    if let Some((name, n)) = fault {
+        if name == point && SEEN.fetch_add(1, Ordering::SeqCst) + 1 == *n {
+            eprintln!("LHM_CHECKPOINT_FAULT: aborting at {point}");
+            std::process::abort();
         }
     }
 }
@@ -121,7 +205,9 @@ fn dtype_name(t: &Tensor) -> String {
     format!("{:?}", t.dtype()).to_lowercase()
 }
 
-fn write_atomic(path: &Path, bytes: &[u8]) -> CheckpointResult<()> {
+/// Writes `bytes` to `path` through a temporary file; `point` names the fault-injection points
+/// (`<point>-written` before the rename, `<point>-renamed` after it).
+fn write_atomic(path: &Path, bytes: &[u8], point: &str) -> CheckpointResult<()> {
     let io = |action: &'static str| {
         move |source| CheckpointError::Io {
             path: path.to_owned(),
@@ -129,24 +215,21 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> CheckpointResult<()> {
             source,
         }
     };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_owned(),
-        _ => PathBuf::from("."),
-    };
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+    let dir = parent_dir(path);
+    let file_name = file_name_of(path);
     let tmp = dir.join(format!(".{file_name}.tmp-{}", std::process::id()));
     let result = (|| {
         let mut file = File::create(&tmp).map_err(io("creating a temporary file"))?;
         file.write_all(bytes).map_err(io("writing"))?;
         file.sync_all().map_err(io("syncing"))?;
+        fault_point(&format!("{point}-written"));
         fs::rename(&tmp, path).map_err(io("renaming the temporary file into place"))?;
         // Make the rename itself durable.
         File::open(&dir)
             .and_then(|d| d.sync_all())
-            .map_err(io("syncing the directory"))
+            .map_err(io("syncing the directory"))?;
+        fault_point(&format!("{point}-renamed"));
+        Ok(())
     })();
     if result.is_err() {
         let _ = fs::remove_file(&tmp);
@@ -161,7 +244,7 @@ pub fn save<T: Serialize>(
     tensors: &[(String, Tensor)],
     payload: &T,
 ) -> CheckpointResult<()> {
-    let paths = CheckpointPaths::new(stem);
+    let mut paths = CheckpointPaths::new(stem);
     let tensor_err = |source| CheckpointError::Tensor {
         path: paths.weights.clone(),
         source,
@@ -177,17 +260,19 @@ pub fn save<T: Serialize>(
             path: paths.weights.clone(),
             reason: format!("cannot serialise tensors: {e}"),
         })?;
+    let stem_name = file_name_of(stem);
+    let fnv = format!("{:016x}", fnv1a64(&bytes));
+    let weights_file = weights_name(&stem_name, &fnv);
+    paths.weights = paths.dir().join(&weights_file);
+    // The tensor file the manifest names now: kept through the clean-up below.
+    let previous = read_weights_file(&paths.meta);
     let envelope = Envelope {
         format: FORMAT_NAME.to_owned(),
         format_version: FORMAT_VERSION,
         kind: kind.to_owned(),
-        weights_file: paths
-            .weights
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default(),
+        weights_file: weights_file.clone(),
         weights_len: bytes.len() as u64,
-        weights_fnv1a64: format!("{:016x}", fnv1a64(&bytes)),
+        weights_fnv1a64: fnv,
         tensors: contiguous
             .iter()
             .map(|(n, t)| {
@@ -206,8 +291,51 @@ pub fn save<T: Serialize>(
         path: paths.meta.clone(),
         reason: format!("cannot serialise metadata: {e}"),
     })?;
-    write_atomic(&paths.weights, &bytes)?;
-    write_atomic(&paths.meta, &json)
+    write_atomic(&paths.weights, &bytes, "weights")?;
+    write_atomic(&paths.meta, &json, "meta")?;
+    remove_unneeded(&paths.dir(), &stem_name, &[Some(weights_file), previous]);
+    Ok(())
+}
+
+/// The tensor file the checkpoint at `stem` has committed to, as its manifest names it.
+pub fn committed_weights(stem: &Path) -> CheckpointResult<PathBuf> {
+    let paths = CheckpointPaths::new(stem);
+    let name = read_weights_file(&paths.meta).ok_or_else(|| CheckpointError::Corrupt {
+        path: paths.meta.clone(),
+        reason: "no readable manifest naming a weights_file".into(),
+    })?;
+    Ok(paths.dir().join(name))
+}
+
+/// The `weights_file` a manifest names, if it can be read (a plain file name only).
+fn read_weights_file(meta: &Path) -> Option<String> {
+    #[derive(Deserialize)]
+    struct Head {
+        weights_file: String,
+    }
+    let head: Head = serde_json::from_slice(&fs::read(meta).ok()?).ok()?;
+    plain_file_name(&head.weights_file).then_some(head.weights_file)
+}
+
+fn plain_file_name(name: &str) -> bool {
+    !name.is_empty() && name != "." && name != ".." && !name.contains(['/', '\\'])
+}
+
+/// Deletes this stem's tensor files other than `keep` and its save's temporary files. Best
+/// effort: what cannot be deleted now is deleted by the next save.
+fn remove_unneeded(dir: &Path, stem_name: &str, keep: &[Option<String>]) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if keep.iter().flatten().any(|k| *k == name) {
+            continue;
+        }
+        if is_own_file(stem_name, &name) {
+            let _ = fs::remove_file(entry.path());
+        }
+    }
 }
 
 /// A checkpoint read back and verified (checksum, manifest); tensors are taken by name.
@@ -278,7 +406,7 @@ impl<T> Loaded<T> {
 
 /// Reads and verifies the checkpoint at `stem`, which must be of `kind`.
 pub fn load<T: DeserializeOwned>(stem: &Path, kind: &str) -> CheckpointResult<Loaded<T>> {
-    let paths = CheckpointPaths::new(stem);
+    let mut paths = CheckpointPaths::new(stem);
     let meta_path = paths.meta.clone();
     let corrupt = |path: &Path, reason: String| CheckpointError::Corrupt {
         path: path.to_owned(),
@@ -319,6 +447,16 @@ pub fn load<T: DeserializeOwned>(stem: &Path, kind: &str) -> CheckpointResult<Lo
             what: format!("metadata payload does not fit this build: {e}"),
         })?;
 
+    if !plain_file_name(&envelope.weights_file) {
+        return Err(corrupt(
+            &meta_path,
+            format!(
+                "weights_file `{}` is not a file name in the checkpoint's directory",
+                envelope.weights_file
+            ),
+        ));
+    }
+    paths.weights = paths.dir().join(&envelope.weights_file);
     let weights_path = paths.weights.clone();
     let bytes = fs::read(&weights_path).map_err(|source| CheckpointError::Io {
         path: weights_path.clone(),
@@ -448,7 +586,12 @@ mod tests {
             Err(CheckpointError::Mismatch { .. })
         ));
 
-        let paths = CheckpointPaths::new(&stem);
+        let paths = loaded.paths.clone();
+        let weights_name = file_name_of(&paths.weights);
+        assert!(
+            weights_name.starts_with("ckpt.v1.") && weights_name.ends_with(".safetensors"),
+            "{weights_name}"
+        );
         let good = fs::read(&paths.weights).unwrap();
         // One flipped byte in the tensor data.
         let mut flipped = good.clone();
@@ -457,7 +600,7 @@ mod tests {
         fs::write(&paths.weights, &flipped).unwrap();
         let err = load::<Payload>(&stem, "test").unwrap_err();
         assert!(matches!(err, CheckpointError::Checksum { .. }), "{err}");
-        assert!(err.to_string().contains("ckpt.v1.safetensors"), "{err}");
+        assert!(err.to_string().contains(&weights_name), "{err}");
         // Truncation.
         fs::write(&paths.weights, &good[..good.len() / 2]).unwrap();
         let err = load::<Payload>(&stem, "test").unwrap_err();
@@ -498,6 +641,133 @@ mod tests {
             .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
             .collect();
         assert!(leftovers.is_empty());
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn own_files_are_told_apart_from_other_stems() {
+        for own in [
+            "checkpoint.0123456789abcdef.safetensors",
+            "checkpoint.safetensors",
+            ".checkpoint.json.tmp-42",
+            ".checkpoint.0123456789abcdef.safetensors.tmp-7",
+            ".checkpoint.safetensors.tmp-7",
+        ] {
+            assert!(is_own_file("checkpoint", own), "{own}");
+        }
+        for other in [
+            "checkpoint.json",
+            "checkpoint.v1.0123456789abcdef.safetensors",
+            "checkpoint.v1.safetensors",
+            ".checkpoint.v1.json.tmp-42",
+            "checkpoint.0123.safetensors",
+            ".checkpoint.json.tmp-",
+            ".checkpoint.json.tmp-x1",
+            "policy.0123456789abcdef.safetensors",
+            "metrics.csv",
+        ] {
+            assert!(!is_own_file("checkpoint", other), "{other}");
+        }
+    }
+
+    fn names_in(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = fs::read_dir(dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_save_keeps_the_new_and_the_previous_tensors_and_clears_what_a_killed_save_left() {
+        let dir = scratch_dir("generations");
+        let stem = dir.join("c");
+        let tensors = |v: f32| {
+            vec![(
+                "w".to_owned(),
+                Tensor::new(&[v, v + 1.0], &Device::Cpu).unwrap(),
+            )]
+        };
+        let payload = |iteration| Payload {
+            iteration,
+            stats: vec![],
+        };
+        // Another stem with a shared prefix, and what a save killed mid-way leaves behind.
+        save(&dir.join("c.v1"), "test", &tensors(9.0), &payload(9)).unwrap();
+        fs::write(dir.join(".c.json.tmp-999999"), b"half a manifest").unwrap();
+        fs::write(
+            dir.join(".c.00000000000000ff.safetensors.tmp-999999"),
+            b"half",
+        )
+        .unwrap();
+        fs::write(dir.join("c.safetensors"), b"an earlier layout's tensors").unwrap();
+        let mut committed = Vec::new();
+        for i in 0..3u64 {
+            save(&stem, "test", &tensors(i as f32), &payload(i)).unwrap();
+            let loaded = load::<Payload>(&stem, "test").unwrap();
+            assert_eq!(loaded.payload.iteration, i);
+            committed.push(file_name_of(&loaded.paths.weights));
+        }
+        // The last two tensor files (the previous one for readers of the old manifest), the
+        // other stem untouched, no temporary files and no orphaned tensors.
+        let v1 = file_name_of(
+            &load::<Payload>(&dir.join("c.v1"), "test")
+                .unwrap()
+                .paths
+                .weights,
+        );
+        let mut expected = vec![
+            "c.json".to_owned(),
+            committed[1].clone(),
+            committed[2].clone(),
+            "c.v1.json".to_owned(),
+            v1,
+        ];
+        expected.sort();
+        assert_eq!(names_in(&dir), expected);
+        // Saving the same tensors again rewrites the same file; the previous manifest named it
+        // too, so the one before goes.
+        save(&stem, "test", &tensors(2.0), &payload(2)).unwrap();
+        expected.retain(|n| *n != committed[1]);
+        assert_eq!(names_in(&dir), expected);
+        let _ = fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn an_earlier_layouts_checkpoint_loads_and_a_manifest_cannot_point_outside_its_directory() {
+        let dir = scratch_dir("layout");
+        let stem = dir.join("old");
+        save(
+            &stem,
+            "test",
+            &sample_tensors(),
+            &Payload {
+                iteration: 3,
+                stats: vec![],
+            },
+        )
+        .unwrap();
+        let loaded = load::<Payload>(&stem, "test").unwrap();
+        let new_name = file_name_of(&loaded.paths.weights);
+        fs::rename(&loaded.paths.weights, dir.join("old.safetensors")).unwrap();
+        let meta = fs::read_to_string(&loaded.paths.meta).unwrap();
+        fs::write(
+            &loaded.paths.meta,
+            meta.replace(&new_name, "old.safetensors"),
+        )
+        .unwrap();
+        assert_eq!(load::<Payload>(&stem, "test").unwrap().payload.iteration, 3);
+        for bad in ["../old.safetensors", "/etc/passwd", ""] {
+            fs::write(&loaded.paths.meta, meta.replace(&new_name, bad)).unwrap();
+            let err = load::<Payload>(&stem, "test").unwrap_err();
+            assert!(
+                matches!(err, CheckpointError::Corrupt { .. })
+                    && err.to_string().contains("weights_file"),
+                "{bad}: {err}"
+            );
+        }
         let _ = fs::remove_dir_all(&dir);
     }
 

@@ -77,7 +77,7 @@ impl Default for EnvConfig {
 
 impl RewardTerms {
     /// Each term times its weight, by name (their sum is the step's task reward).
-    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 9] {
+    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 10] {
         [
             ("locomotion", w.locomotion * self.locomotion),
             ("facing", w.facing * self.facing),
@@ -88,6 +88,7 @@ impl RewardTerms {
             ("power", w.power * self.power),
             ("release_retreat", w.release_retreat * self.release_retreat),
             ("success", w.success * self.success),
+            ("alive", w.alive * self.alive),
         ]
     }
 }
@@ -105,6 +106,8 @@ pub struct RewardTerms {
     pub facing: f32,
     /// 1 on the step a pair is handed off within the success radius.
     pub success: f32,
+    /// 1 on every step that does not end in a fall.
+    pub alive: f32,
 }
 
 #[derive(Clone, Debug)]
@@ -371,19 +374,15 @@ impl TaskEnv {
                 terms.success = 1.0;
             }
         }
-        let w = &self.config.weights;
-        let reward = w.locomotion * terms.locomotion
-            + w.hands * terms.hands
-            + w.lift * terms.lift
-            + w.carry * terms.carry
-            + w.place * terms.place
-            + w.power * terms.power
-            + w.release_retreat * terms.release_retreat
-            + w.facing * terms.facing
-            + w.success * terms.success;
         let heights: Vec<f32> = bodies.iter().map(|b| b.pos.z).collect();
         let fell = fallen(&heights, &self.exempt, self.config.fall_height)
             || bodies[0].pos.z < self.config.root_fall_height;
+        terms.alive = if fell { 0.0 } else { 1.0 };
+        let reward = terms
+            .weighted(&self.config.weights)
+            .iter()
+            .map(|(_, v)| v)
+            .sum();
         let done = fell || handoff == Handoff::Done;
         StepResult {
             reward,

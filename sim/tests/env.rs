@@ -16,7 +16,8 @@ fn setup(config: EnvConfig) -> (CharacterModel, TaskEnv) {
 
 #[test]
 fn observations_have_their_dimensions_and_a_fall_is_terminal() {
-    let config = EnvConfig::default();
+    let mut config = EnvConfig::default();
+    config.weights.alive = 0.5;
     let (model, mut env) = setup(config.clone());
     // Knees and elbows at mid-range: a crouch that tips over (zero action would stand).
     let zero: Vec<f32> = model
@@ -43,6 +44,16 @@ fn observations_have_their_dimensions_and_a_fall_is_terminal() {
             "step {step}"
         );
         assert!(r.reward.is_finite() && r.terms.power <= 0.0);
+        // The alive term pays on every step but the one that falls, and the step's reward is
+        // the sum of the weighted terms.
+        assert_eq!(r.terms.alive, if r.fell { 0.0 } else { 1.0 }, "step {step}");
+        let sum: f32 = r
+            .terms
+            .weighted(&config.weights)
+            .iter()
+            .map(|(_, v)| v)
+            .sum();
+        assert!((r.reward - sum).abs() < 1e-6, "step {step}");
         if r.done {
             ended = Some((step, r));
             break;

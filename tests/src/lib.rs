@@ -107,11 +107,16 @@ impl Drop for Proc {
 }
 
 fn spawn(name: &str, args: &[String], log: &Path) -> Proc {
+    spawn_with_env(name, args, log, &[])
+}
+
+fn spawn_with_env(name: &str, args: &[String], log: &Path, env: &[(&str, &str)]) -> Proc {
     let file = std::fs::File::create(log).expect("log file");
     let err = file.try_clone().expect("log file");
     let child = Command::new(lhm())
         .args(args)
         .env("RUST_LOG", "info")
+        .envs(env.iter().copied())
         .stdin(Stdio::null())
         .stdout(file)
         .stderr(err)
@@ -124,6 +129,17 @@ fn spawn(name: &str, args: &[String], log: &Path) -> Proc {
 }
 
 pub fn start_learner(dir: &Path, config: &Path, port: u16, log_name: &str) -> Proc {
+    start_learner_with_env(dir, config, port, log_name, &[])
+}
+
+/// [`start_learner`] with extra environment variables (e.g. `LHM_CHECKPOINT_FAULT`).
+pub fn start_learner_with_env(
+    dir: &Path,
+    config: &Path,
+    port: u16,
+    log_name: &str,
+    env: &[(&str, &str)],
+) -> Proc {
     let args: Vec<String> = [
         "learner",
         "--listen",
@@ -137,7 +153,7 @@ pub fn start_learner(dir: &Path, config: &Path, port: u16, log_name: &str) -> Pr
     .iter()
     .map(|s| s.to_string())
     .collect();
-    spawn("learner", &args, &dir.join(log_name))
+    spawn_with_env("learner", &args, &dir.join(log_name), env)
 }
 
 pub fn start_actor(dir: &Path, port: u16, id: &str, seed: u64) -> Proc {

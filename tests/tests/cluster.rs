@@ -2,7 +2,8 @@
 //! version advances with two actors; a SIGKILLed actor costs nothing but its unfinished chunk;
 //! a SIGKILLed learner resumes from its checkpoint and the running actors come back to it;
 //! garbage on the trajectory key is rejected and counted; a SIGKILLed `lhm train` takes its actor
-//! processes with it.
+//! processes with it, its logs are plain text, and a second session appends to them; a learner
+//! killed at any point of a checkpoint save resumes from a whole checkpoint.
 
 use std::time::Duration;
 
@@ -209,6 +210,27 @@ fn a_killed_lhm_train_takes_its_actor_processes_with_it() {
     });
     let actors = children_of(train.pid());
     assert_eq!(actors.len(), 2, "actor processes of lhm train: {actors:?}");
+    // Logs written to files are plain text: a progress line per iteration, no colour codes.
+    let read = |p: &std::path::Path| std::fs::read_to_string(p).unwrap_or_default();
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    while !read(&dir.join("train.log")).contains("iteration 1 |") {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no plain progress line in train.log: {}",
+            read(&dir.join("train.log"))
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let run_dir = dir.join("runs").join("e2e");
+    for log in [dir.join("train.log"), run_dir.join("actor-0.log")] {
+        let text = read(&log);
+        assert!(!text.is_empty(), "{} is empty", log.display());
+        assert!(
+            !text.contains('\x1b'),
+            "colour codes in {}: {text}",
+            log.display()
+        );
+    }
     train.signal(libc::SIGKILL);
     train
         .wait_exit(Duration::from_secs(10))
@@ -221,5 +243,95 @@ fn a_killed_lhm_train_takes_its_actor_processes_with_it() {
             actors.iter().map(|&p| proc_state(p)).collect::<Vec<_>>()
         );
         std::thread::sleep(Duration::from_millis(100));
+    }
+    // Started again on the same run, the actors append to their logs instead of truncating them.
+    let started = |text: &str| text.matches("actor local-0 waiting for").count();
+    assert_eq!(started(&read(&run_dir.join("actor-0.log"))), 1);
+    let mut again = start_train(&dir, &config, 2);
+    let deadline = std::time::Instant::now() + LONG;
+    while started(&read(&run_dir.join("actor-0.log"))) < 2 {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the second session's actor never logged: {}",
+            read(&run_dir.join("actor-0.log"))
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    again.signal(libc::SIGTERM);
+    again.wait_exit(Duration::from_secs(60));
+}
+
+/// Fault injection, not timing luck: the learner aborts at each point of its second checkpoint
+/// save in turn (`LHM_CHECKPOINT_FAULT`), and a learner started on the same run must resume
+/// from the last committed checkpoint (iteration 2 until the manifest's rename, 4 after it) and
+/// leave no temporary or orphaned tensor files behind once it has saved again.
+#[test]
+fn a_learner_killed_at_any_point_of_a_save_resumes_from_a_whole_checkpoint() {
+    for (point, committed) in [
+        ("weights-written", 2),
+        ("weights-renamed", 2),
+        ("meta-written", 2),
+        ("meta-renamed", 4),
+    ] {
+        let dir = scratch_dir(&format!("fault-{point}"));
+        let config = write_config(&dir);
+        let port = free_port();
+        // Saves 1 and 2 are iteration 2's checkpoint and policy; save 3 is iteration 4's
+        // checkpoint.
+        let fault = format!("{point}:3");
+        let mut learner = start_learner_with_env(
+            &dir,
+            &config,
+            port,
+            "learner.log",
+            &[("LHM_CHECKPOINT_FAULT", &fault)],
+        );
+        let _actor = start_actor(&dir, port, "a0", 1);
+        let exit = learner
+            .wait_exit(LONG)
+            .unwrap_or_else(|| panic!("{point}: the learner never reached its fault"));
+        assert!(!exit.success(), "{point}: {exit:?}");
+        let log = std::fs::read_to_string(dir.join("learner.log")).unwrap_or_default();
+        assert!(
+            log.contains(&format!("aborting at {point}")),
+            "{point}: {log}"
+        );
+
+        let mut again = start_learner(&dir, &config, port, "learner-2.log");
+        let resumed = wait_for(&dir, "the restarted learner", LONG, |s| {
+            s.pointer("/resumed_from_iteration")
+                .and_then(|v| v.as_u64())
+                .is_some()
+        });
+        assert_eq!(
+            u64_at(&resumed, "/resumed_from_iteration"),
+            committed,
+            "{point}"
+        );
+        wait_for(&dir, "the next checkpoint", LONG, |s| {
+            u64_at(s, "/iteration") >= committed + 2
+        });
+        again.signal(libc::SIGTERM);
+        again.wait_exit(Duration::from_secs(60));
+        let run = dir.join("runs/e2e");
+        let names: Vec<String> = std::fs::read_dir(&run)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        assert!(
+            !names.iter().any(|n| n.contains(".tmp-")),
+            "{point}: temporary files left: {names:?}"
+        );
+        for stem in ["checkpoint", "policy"] {
+            let tensors = names
+                .iter()
+                .filter(|n| n.starts_with(&format!("{stem}.")) && n.ends_with(".safetensors"))
+                .count();
+            assert!(
+                (1..=2).contains(&tensors),
+                "{point}: {tensors} tensor files of {stem}: {names:?}"
+            );
+        }
     }
 }

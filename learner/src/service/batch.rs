@@ -23,6 +23,8 @@ pub struct EpisodeSummary {
     pub reached: u64,
     pub task_start_episodes: u64,
     pub task_start_reached: u64,
+    /// Falls among the episodes from task starts (demo starts mid-stride fall more often).
+    pub task_start_falls: u64,
     pub mean_task_reward: f64,
     pub mean_style_reward: f64,
     /// Per task-reward term, its weighted mean per step over the finished episodes.
@@ -33,6 +35,11 @@ impl EpisodeSummary {
     /// Falls per finished episode (NaN with no episodes).
     pub fn fall_fraction(&self) -> f64 {
         self.falls as f64 / self.episodes as f64
+    }
+
+    /// Falls per finished episode from a task start (NaN with none).
+    pub fn task_start_fall_fraction(&self) -> f64 {
+        self.task_start_falls as f64 / self.task_start_episodes as f64
     }
 
     /// Reach rate over episodes from task starts (NaN with none).
@@ -105,6 +112,7 @@ pub fn assemble(
             if !e.demo_start {
                 summary.task_start_episodes += 1;
                 summary.task_start_reached += u64::from(e.reached);
+                summary.task_start_falls += u64::from(e.fell);
             }
         }
     }

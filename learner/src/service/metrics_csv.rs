@@ -17,6 +17,7 @@ pub const COLUMNS: &[&str] = &[
     "mean_episode_length",
     "success_rate",
     "fall_fraction",
+    "task_start_fall_fraction",
     "reach_rate",
     "disc_accuracy",
     "style_reward",
@@ -24,6 +25,7 @@ pub const COLUMNS: &[&str] = &[
     "policy_loss",
     "value_loss",
     "approx_kl",
+    "lr",
     "clip_fraction",
     "stale_chunks",
     "accepted_chunks",
@@ -36,6 +38,7 @@ pub const COLUMNS: &[&str] = &[
     "reward_power",
     "reward_release_retreat",
     "reward_success",
+    "reward_alive",
 ];
 
 pub struct MetricsCsv {

@@ -37,6 +37,15 @@ pub struct TrainConfig {
     pub run_id: String,
     /// `teacher1`, `teacher2`, `student`.
     pub role: String,
+    /// Teacher 2's runs: the Teacher 1 policy checkpoint (a stem such as
+    /// `runs/p/t1-rr/policy`, with or without `.json`) that plays each episode's first pair.
+    /// The learner loads it and serves it to the actors on the run's `teacher1` policy key.
+    pub teacher1: Option<PathBuf>,
+    /// Fine-tuning (release-and-retreat after pretraining, Teacher 2 from Teacher 1): a new run
+    /// starts from this checkpoint's policy, value function and normalisers (same network
+    /// layout required) instead of random weights; optimiser and discriminator start fresh. A
+    /// run that already has its own checkpoint resumes from that and ignores this.
+    pub init_from: Option<PathBuf>,
     /// Runs live in `<runs_dir>/<run_id>/` (checkpoint, status.json, run.mcap).
     pub runs_dir: PathBuf,
     /// Transitions per PPO update.
@@ -82,6 +91,12 @@ impl Default for TrainConfig {
         let amp_defaults = AmpConfig::default();
         let amp = AmpConfig {
             disc: lhm_nets::MlpConfig::cpu_preset(),
+            // 1e-5, not IsaacGymEnvs' 5e-5: our discriminator sees a 4k-step batch per update
+            // (theirs 65k) and at 5e-5 it won (accuracy 0.98, style 0.1) within 300k samples.
+            adam: lhm_nets::AdamConfig {
+                lr: 1e-5,
+                ..amp_defaults.adam.clone()
+            },
             minibatch_size: 1024,
             // 50k rows of 2 x 105 features: 42 MB of learner state instead of 840 MB.
             replay_capacity: 50_000,
@@ -90,6 +105,8 @@ impl Default for TrainConfig {
         Self {
             run_id: "teacher1".into(),
             role: "teacher1".into(),
+            teacher1: None,
+            init_from: None,
             runs_dir: PathBuf::from("runs"),
             batch_steps: 4096,
             // Two free-running actors on 2 cores made half the chunks one version stale at lag 1;
@@ -98,11 +115,19 @@ impl Default for TrainConfig {
             max_policy_lag: 3,
             checkpoint_every: 10,
             max_iterations: None,
-            network: ActorCriticConfig {
-                // IsaacGymEnvs HumanoidAMP: normalize_value True. Returns run from ~3 (a fall in
-                // the first second) to tens; a critic regressing them raw at lr 5e-5 lagged.
-                normalize_value: true,
-                ..ActorCriticConfig::with_hidden(&[512, 256])
+            network: {
+                let mut network = ActorCriticConfig {
+                    // IsaacGymEnvs HumanoidAMP: normalize_value True. Returns run from ~3 (a
+                    // fall in the first second) to tens; a critic regressing them raw at lr 5e-5
+                    // lagged.
+                    normalize_value: true,
+                    ..ActorCriticConfig::with_hidden(&[512, 256])
+                };
+                // Exploration noise e^-3.5 = 0.030 instead of the anchors' e^-2.9 = 0.055: at
+                // 0.055 the noise alone topples the neutral pose in ~45 steps (MuJoCo too), and
+                // on a CPU budget the policy never got past that (RESULTS.md).
+                network.policy.log_std = lhm_nets::LogStd::Fixed(-3.5);
+                network
             },
             ppo,
             amp_enabled: true,
@@ -335,6 +360,125 @@ fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<(), ServiceE
 }
 
 /// The checkpoint stem of a run: `<run_dir>/checkpoint.{safetensors,json}`.
+/// A checkpoint path as users write it: a stem, or the stem's `.json` manifest.
+fn stem_of(path: &Path) -> PathBuf {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("json") => path.with_extension(""),
+        _ => path.to_owned(),
+    }
+}
+
+/// Copies the policy, value function and normalisers of the checkpoint at `path` into a fresh
+/// learner; a different network layout is an error naming the file and the tensor.
+fn init_actor_critic(learner: &mut Learner, path: &Path) -> Result<(), ServiceError> {
+    let stem = stem_of(path);
+    let source = Learner::load(&stem, None)?;
+    let mismatch = |what: String| {
+        ServiceError::Config(format!(
+            "{}: cannot start from this checkpoint: {what}",
+            stem.display()
+        ))
+    };
+    let from: std::collections::HashMap<String, candle_core::Var> =
+        source.actor_critic.named_vars().into_iter().collect();
+    for (name, var) in learner.actor_critic.named_vars() {
+        let src = from
+            .get(&name)
+            .ok_or_else(|| mismatch(format!("it has no tensor `{name}`")))?;
+        if src.dims() != var.dims() {
+            return Err(mismatch(format!(
+                "`{name}` is {:?}, this run's is {:?}",
+                src.dims(),
+                var.dims()
+            )));
+        }
+        var.set(src.as_tensor())
+            .map_err(|e| mismatch(format!("`{name}`: {e}")))?;
+    }
+    let ac = &mut learner.actor_critic;
+    let width =
+        |n: &Option<lhm_nets::RunningMeanStd>| n.as_ref().map(lhm_nets::RunningMeanStd::dim);
+    if width(&ac.obs_norm) != width(&source.actor_critic.obs_norm)
+        || width(&ac.value_norm) != width(&source.actor_critic.value_norm)
+    {
+        return Err(mismatch("its normalisers differ from this run's".into()));
+    }
+    ac.obs_norm = source.actor_critic.obs_norm.clone();
+    ac.value_norm = source.actor_critic.value_norm.clone();
+    tracing::info!(
+        "starting from {} (iteration {})",
+        stem.display(),
+        source.counters.iteration
+    );
+    Ok(())
+}
+
+/// Teacher 2's frozen Teacher 1 (`None` for other roles); a Teacher 2 run without one, or with
+/// one that does not fit this run's observations and actions, is an error naming the file.
+fn load_teacher1(config: &TrainConfig, role: Role) -> Result<Option<Learner>, ServiceError> {
+    let path = match (role, &config.teacher1) {
+        (Role::Teacher2, Some(path)) => path,
+        (Role::Teacher2, None) => {
+            return Err(ServiceError::Config(
+                "a teacher2 run needs Teacher 1's policy: `teacher1 = \"runs/<run>/policy\"` in                  the config, or --teacher1"
+                    .into(),
+            ))
+        }
+        _ => return Ok(None),
+    };
+    let stem = stem_of(path);
+    let t1 = Learner::load(&stem, None)?;
+    let spec = config.run_spec();
+    let (obs, act) = (t1.actor_critic.obs_dim(), t1.actor_critic.act_dim());
+    if (obs, act) != (spec.obs_dim, spec.act_dim) {
+        return Err(ServiceError::Config(format!(
+            "{}: Teacher 1 takes {obs} observations and gives {act} actions; this run has {} and {}",
+            stem.display(),
+            spec.obs_dim,
+            spec.act_dim
+        )));
+    }
+    tracing::info!(
+        "Teacher 1 for the first pairs: {} (iteration {})",
+        stem.display(),
+        t1.counters.iteration
+    );
+    Ok(Some(t1))
+}
+
+/// Answers queries on the run's `teacher1` policy key with `t1`'s weights (fixed: it is not
+/// trained here).
+fn serve_teacher1(
+    session: &zenoh::Session,
+    config: &TrainConfig,
+    spec: &RunSpec,
+    t1: &Learner,
+) -> Result<zenoh::query::Queryable<()>, ServiceError> {
+    // Teacher 1's own network settings (its sizes or noise may differ from Teacher 2's).
+    let t1_spec = RunSpec {
+        actor_critic: t1.actor_critic.config.clone(),
+        ..spec.clone()
+    };
+    let bytes = encode_policy(
+        &config.run_id,
+        Role::Teacher1,
+        t1.counters.iteration,
+        &t1_spec,
+        &t1.actor_critic,
+    )?
+    .encode_checked()
+    .map_err(lhm_cluster::ClusterError::from)?;
+    session
+        .declare_queryable(keys::policy(&config.run_id, Role::Teacher1))
+        .callback(move |query| {
+            if let Err(e) = query.reply(query.key_expr().clone(), bytes.clone()).wait() {
+                tracing::warn!("answering a Teacher 1 weights query: {e}");
+            }
+        })
+        .wait()
+        .map_err(zerr)
+}
+
 pub fn checkpoint_stem(run_dir: &Path) -> PathBuf {
     run_dir.join("checkpoint")
 }
@@ -445,6 +589,7 @@ pub fn run_learner(
 ) -> Result<LearnerStatus, ServiceError> {
     let role = config.role()?;
     keys::check_chunk("run id", &config.run_id).map_err(lhm_cluster::ClusterError::from)?;
+    let teacher1 = load_teacher1(config, role)?;
     if config.amp_enabled && demo.is_none() {
         return Err(ServiceError::Config(
             "AMP is on but no demo motion was given (install clips with scripts/install-motions, \
@@ -469,11 +614,19 @@ pub fn run_learner(
         let it = l.counters.iteration;
         (l, Some(it))
     } else {
-        (Learner::new(learner_config)?, None)
+        let mut fresh = Learner::new(learner_config)?;
+        if let Some(path) = &config.init_from {
+            init_actor_critic(&mut fresh, path)?;
+        }
+        (fresh, None)
     };
     let spec = config.run_spec();
 
     let session = lhm_cluster::open_session(NodeMode::Router, endpoints)?;
+    let _teacher1_queryable = match &teacher1 {
+        Some(t1) => Some(serve_teacher1(&session, config, &spec, t1)?),
+        None => None,
+    };
     let policy_key = keys::policy(&config.run_id, role);
     let encode = |learner: &Learner| -> Result<Vec<u8>, ServiceError> {
         let msg = encode_policy(
@@ -715,6 +868,7 @@ pub fn run_learner(
                 ("mean_episode_length", s.mean_length),
                 ("success_rate", s.success_rate),
                 ("fall_fraction", report.fall_fraction),
+                ("task_start_fall_fraction", s.task_start_fall_fraction()),
                 ("reach_rate", report.reach_rate),
                 ("disc_accuracy", report.disc_accuracy.unwrap_or(f64::NAN)),
                 ("style_reward", s.mean_style_reward),
@@ -722,6 +876,7 @@ pub fn run_learner(
                 ("policy_loss", ppo_stats.policy_loss),
                 ("value_loss", ppo_stats.value_loss),
                 ("approx_kl", ppo_stats.approx_kl),
+                ("lr", ppo_stats.lr),
                 ("clip_fraction", ppo_stats.clip_fraction),
                 ("stale_chunks", book.counters.stale as f64),
                 ("accepted_chunks", book.counters.accepted as f64),
@@ -756,6 +911,7 @@ pub fn run_learner(
         v.insert("ppo/policy_loss".into(), ppo_stats.policy_loss);
         v.insert("ppo/value_loss".into(), ppo_stats.value_loss);
         v.insert("ppo/approx_kl".into(), ppo_stats.approx_kl);
+        v.insert("ppo/lr".into(), ppo_stats.lr);
         v.insert("ppo/clip_fraction".into(), ppo_stats.clip_fraction);
         if let Some(a) = &amp_stats {
             v.insert("amp/accuracy".into(), a.accuracy());
@@ -845,5 +1001,91 @@ mod tests {
         let err = parse("run_id = \n").unwrap_err().to_string();
         assert!(err.contains("lhm-train-config"), "{err}");
         assert!(parse("role = \"critic\"\n").unwrap().role().is_err());
+    }
+
+    /// A teacher2 run names its Teacher 1; one that does not fit the run's observations is
+    /// refused naming the file; other roles need none.
+    #[test]
+    fn teacher2_needs_a_fitting_teacher1() {
+        let mut config = TrainConfig {
+            role: "teacher2".into(),
+            ..TrainConfig::default()
+        };
+        let err = load_teacher1(&config, Role::Teacher2).err().unwrap();
+        assert!(err.to_string().contains("teacher1"), "{err}");
+        assert!(load_teacher1(&TrainConfig::default(), Role::Teacher1)
+            .unwrap()
+            .is_none());
+
+        let dir = std::env::temp_dir().join(format!("lhm-teacher1-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let spec = config.run_spec();
+        let small = |obs_dim| LearnerConfig {
+            obs_dim,
+            act_dim: spec.act_dim,
+            actor_critic: ActorCriticConfig::with_hidden(&[8]),
+            ppo: PpoConfig::default(),
+            amp: None,
+        };
+        Learner::new(small(spec.obs_dim - 1))
+            .unwrap()
+            .save_policy(&dir.join("wrong"))
+            .unwrap();
+        config.teacher1 = Some(dir.join("wrong.json"));
+        let err = load_teacher1(&config, Role::Teacher2).err().unwrap();
+        assert!(
+            err.to_string().contains("wrong") && err.to_string().contains("observations"),
+            "{err}"
+        );
+        Learner::new(small(spec.obs_dim))
+            .unwrap()
+            .save_policy(&dir.join("right"))
+            .unwrap();
+        config.teacher1 = Some(dir.join("right"));
+        assert!(load_teacher1(&config, Role::Teacher2).unwrap().is_some());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A fine-tuning run starts acting exactly as the checkpoint it starts from; a checkpoint of
+    /// another layout is refused naming the tensor.
+    #[test]
+    fn init_from_copies_the_policy_and_refuses_another_layout() {
+        let dir = std::env::temp_dir().join(format!("lhm-init-from-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = |hidden: &[usize], seed| LearnerConfig {
+            obs_dim: 6,
+            act_dim: 3,
+            actor_critic: ActorCriticConfig {
+                init_seed: seed,
+                normalize_value: true,
+                ..ActorCriticConfig::with_hidden(hidden)
+            },
+            ppo: PpoConfig::default(),
+            amp: None,
+        };
+        let mut source = Learner::new(config(&[8], 1)).unwrap();
+        let obs: Vec<f32> = (0..12).map(|i| (i as f32 * 0.7).sin()).collect();
+        if let Some(norm) = &mut source.actor_critic.obs_norm {
+            norm.update(&obs).unwrap();
+        }
+        source.save_policy(&dir.join("t1")).unwrap();
+        let mut fresh = Learner::new(config(&[8], 2)).unwrap();
+        assert_ne!(
+            fresh.actor_critic.act_deterministic(&obs).unwrap(),
+            source.actor_critic.act_deterministic(&obs).unwrap()
+        );
+        init_actor_critic(&mut fresh, &dir.join("t1.json")).unwrap();
+        assert_eq!(
+            fresh.actor_critic.act_deterministic(&obs).unwrap(),
+            source.actor_critic.act_deterministic(&obs).unwrap()
+        );
+        assert_eq!(fresh.counters.iteration, 0, "a new run, not a resumed one");
+        let mut other = Learner::new(config(&[4], 2)).unwrap();
+        let err = init_actor_critic(&mut other, &dir.join("t1")).unwrap_err();
+        assert!(
+            err.to_string().contains("t1") && err.to_string().contains("policy.mean"),
+            "{err}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

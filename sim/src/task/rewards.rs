@@ -168,6 +168,10 @@ pub struct RewardWeights {
     /// One-off reward on the step a pair is placed within the success radius: a successful
     /// cycle ends the episode (terminal), so it must pay at least what staying on would.
     pub success: f32,
+    /// Per step the character has not fallen (Gym's Humanoid `healthy_reward`): with AMP the
+    /// discriminator's reward shrinks on everything the early policy does, so without it the
+    /// only reason to stay up was ~0.05 of task reward per step (RESULTS.md, third session).
+    pub alive: f32,
 }
 
 impl Default for RewardWeights {
@@ -185,6 +189,8 @@ impl Default for RewardWeights {
             release_retreat: 0.0,
             facing: 0.1,
             success: 20.0,
+            // 0.5 (x the learner's task weight 0.5): survival now pays 0.25 per step.
+            alive: 0.5,
         }
     }
 }
