@@ -84,6 +84,7 @@ impl LearnerOpts {
             }
         }
         keys::check_chunk("run id", &config.run_id)?;
+        config.check()?;
         Ok(config)
     }
 
@@ -100,10 +101,10 @@ pub struct TrainArgs {
     #[command(flatten)]
     learner: LearnerOpts,
     /// Actor processes to start (default: one per CPU core).
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one)]
     actors: Option<usize>,
     /// Environments per actor process.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 16, value_parser = at_least_one)]
     envs: usize,
     /// Loopback port the learner listens on (0: any free port).
     #[arg(long, default_value_t = 0)]
@@ -114,15 +115,15 @@ pub struct TrainArgs {
 pub struct LearnerArgs {
     #[command(flatten)]
     learner: LearnerOpts,
-    /// Endpoints to listen on.
-    #[arg(long, default_value = "tcp/0.0.0.0:7447")]
+    /// Endpoints to listen on (<protocol>/<address>, e.g. tcp/0.0.0.0:7447).
+    #[arg(long, default_value = "tcp/0.0.0.0:7447", value_parser = endpoint)]
     listen: Vec<String>,
 }
 
 #[derive(Args)]
 pub struct ActorArgs {
     /// The learner's (or a router's) endpoint, e.g. tcp/10.0.0.5:7447.
-    #[arg(long, required = true)]
+    #[arg(long, required = true, value_parser = endpoint)]
     connect: Vec<String>,
     #[arg(long, default_value = "teacher1")]
     run_id: String,
@@ -130,7 +131,7 @@ pub struct ActorArgs {
     #[arg(long, default_value = "teacher1")]
     role: String,
     /// Environments stepped by this process.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 16, value_parser = at_least_one)]
     envs: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -148,6 +149,34 @@ pub struct ActorArgs {
     summary_json: bool,
     #[arg(long)]
     zenoh_config: Option<PathBuf>,
+}
+
+/// A count of processes or environments: 0 is an error, not silently 1.
+fn at_least_one(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("{text:?} is not a whole number")),
+    }
+}
+
+/// A Zenoh endpoint, `<protocol>/<address>` (checked here so that a typo gets a readable error
+/// rather than Zenoh's internal one).
+fn endpoint(text: &str) -> Result<String, String> {
+    let valid = text.split_once('/').is_some_and(|(protocol, address)| {
+        !protocol.is_empty()
+            && protocol
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-')
+            && !address.is_empty()
+    });
+    if valid {
+        Ok(text.to_owned())
+    } else {
+        Err(format!(
+            "{text:?} is not an endpoint: expected <protocol>/<address>, e.g. tcp/0.0.0.0:7447 or tcp/10.0.0.5:7447"
+        ))
+    }
 }
 
 fn progress_bar(max: Option<u64>) -> ProgressBar {
@@ -252,7 +281,7 @@ pub fn train(args: TrainArgs) -> Result<()> {
     if config.chunk_sets_per_version == 0 {
         // The local actors share the learner's cores: each sends its share of one batch per
         // version and waits for the update (free-running, half the chunks went stale).
-        let per_set = actors * args.envs.max(1) * config.chunk_steps.max(1) as usize;
+        let per_set = actors * args.envs * config.chunk_steps as usize;
         config.chunk_sets_per_version = config.batch_steps.div_ceil(per_set).max(1) as u32;
     }
     let exe = std::env::current_exe().context("locating the lhm executable")?;
@@ -384,7 +413,7 @@ pub fn actor(args: ActorArgs) -> Result<()> {
         run_id: args.run_id,
         role,
         actor_id: args.actor_id.unwrap_or_else(ActorConfig::default_actor_id),
-        envs: args.envs.max(1),
+        envs: args.envs,
         seed: args.seed,
         max_chunks: args.max_chunks,
         publish: !args.no_publish,

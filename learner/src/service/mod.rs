@@ -190,6 +190,23 @@ impl TrainConfig {
         }
     }
 
+    /// Counts that must be positive (a 0 was silently treated as 1 before).
+    pub fn check(&self) -> Result<(), ServiceError> {
+        for (name, value) in [
+            ("batch_steps", self.batch_steps),
+            ("chunk_steps", self.chunk_steps as usize),
+            ("ppo.epochs", self.ppo.epochs),
+            ("ppo.minibatch_size", self.ppo.minibatch_size),
+        ] {
+            if value == 0 {
+                return Err(ServiceError::Config(format!(
+                    "{name} must be at least 1, got 0"
+                )));
+            }
+        }
+        Ok(())
+    }
+
     pub fn learner_config(&self) -> LearnerConfig {
         let spec = self.run_spec();
         LearnerConfig {
@@ -588,6 +605,7 @@ pub fn run_learner(
     mut hooks: Hooks<'_>,
 ) -> Result<LearnerStatus, ServiceError> {
     let role = config.role()?;
+    config.check()?;
     keys::check_chunk("run id", &config.run_id).map_err(lhm_cluster::ClusterError::from)?;
     let teacher1 = load_teacher1(config, role)?;
     if config.amp_enabled && demo.is_none() {

@@ -1,0 +1,64 @@
+//! Bad command-line input gets a clear error and a failing exit status, never a silent
+//! substitute (a 0 count used to become 1) or a library's debug dump (an endpoint typo printed
+//! Zenoh's internal `Json5Err { … }` with source paths).
+
+use std::process::Command;
+
+use lhm_e2e::lhm;
+
+/// Runs `lhm args…`; (success, stderr).
+fn run(args: &[&str]) -> (bool, String) {
+    let dir = std::env::temp_dir().join(format!("lhm-cli-errors-{}", std::process::id()));
+    let out = Command::new(lhm())
+        .args(args)
+        .args(["--runs-dir", &dir.display().to_string()])
+        .output()
+        .expect("running lhm");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn zero_counts_and_malformed_endpoints_are_refused_clearly() {
+    for (args, expected) in [
+        (vec!["train", "--no-amp", "--actors", "0"], "--actors"),
+        (vec!["train", "--no-amp", "--envs", "0"], "--envs"),
+        (
+            vec!["train", "--no-amp", "--batch-steps", "0"],
+            "batch_steps",
+        ),
+        (
+            vec!["learner", "--no-amp", "--listen", "foo"],
+            "not an endpoint",
+        ),
+    ] {
+        let (ok, stderr) = run(&args);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(
+            !stderr.contains("Json5Err") && !stderr.contains(".cargo/registry"),
+            "{args:?} printed a debug value: {stderr}"
+        );
+    }
+    // `lhm actor` has no --runs-dir: checked on its own.
+    let out = Command::new(lhm())
+        .args(["actor", "--connect", "foo", "--envs", "2"])
+        .output()
+        .expect("running lhm");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("not an endpoint"),
+        "{stderr}"
+    );
+    let out = Command::new(lhm())
+        .args(["actor", "--connect", "tcp/127.0.0.1:1", "--envs", "0"])
+        .output()
+        .expect("running lhm");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("at least 1"),
+        "{stderr}"
+    );
+}
