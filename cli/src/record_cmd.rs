@@ -39,10 +39,7 @@ pub struct RecordArgs {
 
 /// A learner checkpoint's stem, given with or without its `.json` / `.safetensors` extension.
 pub(crate) fn checkpoint_stem(path: &Path) -> PathBuf {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some("json" | "safetensors") => path.with_extension(""),
-        _ => path.to_owned(),
-    }
+    lhm_nets::checkpoint::stem_of(path)
 }
 
 pub fn run(args: RecordArgs) -> Result<()> {

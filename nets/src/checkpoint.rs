@@ -297,6 +297,14 @@ pub fn save<T: Serialize>(
     Ok(())
 }
 
+/// A checkpoint path as users write it, with or without `.json` / `.safetensors`, as its stem.
+pub fn stem_of(path: &Path) -> PathBuf {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("json" | "safetensors") => path.with_extension(""),
+        _ => path.to_owned(),
+    }
+}
+
 /// The tensor file the checkpoint at `stem` has committed to, as its manifest names it.
 pub fn committed_weights(stem: &Path) -> CheckpointResult<PathBuf> {
     let paths = CheckpointPaths::new(stem);

@@ -377,18 +377,10 @@ fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<(), ServiceE
 }
 
 /// The checkpoint stem of a run: `<run_dir>/checkpoint.{safetensors,json}`.
-/// A checkpoint path as users write it: a stem, or the stem's `.json` manifest.
-fn stem_of(path: &Path) -> PathBuf {
-    match path.extension().and_then(|e| e.to_str()) {
-        Some("json") => path.with_extension(""),
-        _ => path.to_owned(),
-    }
-}
-
 /// Copies the policy, value function and normalisers of the checkpoint at `path` into a fresh
 /// learner; a different network layout is an error naming the file and the tensor.
 fn init_actor_critic(learner: &mut Learner, path: &Path) -> Result<(), ServiceError> {
-    let stem = stem_of(path);
+    let stem = lhm_nets::checkpoint::stem_of(path);
     let source = Learner::load(&stem, None)?;
     let mismatch = |what: String| {
         ServiceError::Config(format!(
@@ -443,7 +435,7 @@ fn load_teacher1(config: &TrainConfig, role: Role) -> Result<Option<Learner>, Se
         }
         _ => return Ok(None),
     };
-    let stem = stem_of(path);
+    let stem = lhm_nets::checkpoint::stem_of(path);
     let t1 = Learner::load(&stem, None)?;
     let spec = config.run_spec();
     let (obs, act) = (t1.actor_critic.obs_dim(), t1.actor_critic.act_dim());
