@@ -342,7 +342,14 @@ impl Rollout {
             let rng = &mut self.rng;
             if (rng.next_f64() as f32) < self.spec.env.demo_start_probability {
                 if let Some((clip, t)) = demo.sample_start(&mut || rng.next_f64()) {
-                    env.start_from_demo(demo, clip, t);
+                    let cfg = &self.spec.env;
+                    if (rng.next_f64() as f32) < cfg.demo_start_toward_object {
+                        let noise = (2.0 * rng.next_f64() as f32 - 1.0) * cfg.demo_start_yaw_noise;
+                        let yaw = env.yaw_toward_first_object() + noise;
+                        env.start_from_demo_heading(demo, clip, t, yaw);
+                    } else {
+                        env.start_from_demo(demo, clip, t);
+                    }
                 }
             }
         }

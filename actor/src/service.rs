@@ -25,6 +25,8 @@ pub struct ActorConfig {
     pub max_chunks: Option<u64>,
     /// Build chunks but do not put them (the benchmark's no-publishing baseline).
     pub publish: bool,
+    /// The benchmark's task files from this directory instead of the copy built in.
+    pub scenes: Option<std::path::PathBuf>,
 }
 
 impl ActorConfig {
@@ -53,6 +55,8 @@ pub struct ActorSummary {
     pub poisoned_chunks: u64,
     pub policy_swaps: u64,
     pub last_version: u64,
+    /// Times the actor paused because its learner was gone.
+    pub learner_pauses: u64,
     /// Seconds spent simulating and acting (excludes waiting for the first weights).
     pub busy_s: f64,
 }
@@ -120,6 +124,70 @@ fn wait_for_newer(
     None
 }
 
+/// How long the learner's liveliness token may be gone before the actor pauses: a restart of
+/// the learner on the same machine takes longer, a network hiccup less.
+pub const LEARNER_GONE_AFTER: Duration = Duration::from_secs(5);
+
+type LivelinessSub =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// Watches the run's learner through its liveliness token (`keys::status(run, "learner")`),
+/// which zenoh withdraws when the learner's process or its link dies.
+struct LearnerWatch {
+    sub: LivelinessSub,
+    gone_since: Option<Instant>,
+}
+
+impl LearnerWatch {
+    fn new(session: &zenoh::Session, run_id: &str) -> Result<Self, ActorError> {
+        let sub = session
+            .liveliness()
+            .declare_subscriber(keys::status(run_id, "learner"))
+            .history(true)
+            .wait()
+            .map_err(zerr)?;
+        // The actor has the learner's weights: it is there, whether or not the token's history
+        // has arrived yet.
+        Ok(Self {
+            sub,
+            gone_since: None,
+        })
+    }
+
+    /// Takes the queued token changes; whether the learner has been gone longer than
+    /// `LEARNER_GONE_AFTER`.
+    fn gone(&mut self) -> bool {
+        while let Ok(Some(sample)) = self.sub.try_recv() {
+            self.apply(sample.kind());
+        }
+        self.gone_since
+            .is_some_and(|t| t.elapsed() >= LEARNER_GONE_AFTER)
+    }
+
+    fn apply(&mut self, kind: zenoh::sample::SampleKind) {
+        match kind {
+            zenoh::sample::SampleKind::Put => self.gone_since = None,
+            zenoh::sample::SampleKind::Delete => {
+                self.gone_since.get_or_insert_with(Instant::now);
+            }
+        }
+    }
+
+    /// Blocks, simulating nothing and sending nothing, until the learner's token is back or a
+    /// stop is requested; whether it came back.
+    fn wait_back(&mut self) -> bool {
+        while !shutdown::requested() {
+            if let Ok(Some(sample)) = self.sub.recv_timeout(Duration::from_millis(200)) {
+                self.apply(sample.kind());
+                if self.gone_since.is_none() {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
 /// The frozen Teacher 1 a Teacher 2 learner serves on the run's `teacher1` policy key.
 fn fetch_teacher1(session: &zenoh::Session, run_id: &str) -> Result<ReceivedPolicy, ActorError> {
     let key = keys::policy(run_id, Role::Teacher1);
@@ -137,7 +205,11 @@ fn fetch_teacher1(session: &zenoh::Session, run_id: &str) -> Result<ReceivedPoli
 pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
     keys::check_chunk("run id", &config.run_id).map_err(ClusterError::from)?;
     keys::check_chunk("actor id", &config.actor_id).map_err(ClusterError::from)?;
-    let bench = Benchmark::embedded().map_err(|e| ActorError::Scenes(e.to_string()))?;
+    let bench = match &config.scenes {
+        Some(dir) => Benchmark::load_dir(dir)
+            .map_err(|e| ActorError::Scenes(format!("{}: {e}", dir.display())))?,
+        None => Benchmark::embedded().map_err(|e| ActorError::Scenes(e.to_string()))?,
+    };
     let session = open_session_retrying(
         NodeMode::Client,
         &config.endpoints,
@@ -215,6 +287,7 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
     let mut version_counted = policy.version;
     let mut last_metrics = Instant::now();
     let mut steps_at_metrics = 0u64;
+    let mut learner = LearnerWatch::new(&session, &config.run_id)?;
     loop {
         // A stop request between steps drops the unfinished chunk: nothing partial is sent.
         if shutdown::requested() {
@@ -222,6 +295,27 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
         }
         if config.max_chunks.is_some_and(|m| summary.chunks_sent >= m) {
             break;
+        }
+        if rollout.at_chunk_boundary() && learner.gone() {
+            // Simulating for no one costs a core and publishes into the void: pause until the
+            // learner (or its restart) is back, then take its weights.
+            let gone_at = Instant::now();
+            tracing::warn!(
+                "learner of run {} gone for {} s: actor {} pauses (no simulation, nothing sent) until it is back",
+                config.run_id,
+                LEARNER_GONE_AFTER.as_secs(),
+                config.actor_id
+            );
+            if !learner.wait_back() {
+                break;
+            }
+            tracing::info!(
+                "learner of run {} back after {:.0} s: actor {} resumes",
+                config.run_id,
+                gone_at.elapsed().as_secs_f64() + LEARNER_GONE_AFTER.as_secs_f64(),
+                config.actor_id
+            );
+            summary.learner_pauses += 1;
         }
         if rollout.at_chunk_boundary() {
             let mut newest = None;

@@ -19,6 +19,7 @@ pub struct BenchArgs {
 enum BenchCommand {
     /// Environment throughput: control and physics steps/s, one core and all cores.
     Env {
+        /// Print the report as JSON.
         #[arg(long)]
         json: bool,
         /// Benchmark task whose room is simulated.
@@ -27,6 +28,7 @@ enum BenchCommand {
         /// Control steps per timed repetition (per world).
         #[arg(long, default_value_t = 600)]
         steps: usize,
+        /// Timed repetitions; the report gives their median.
         #[arg(long, default_value_t = 5)]
         repetitions: usize,
         /// Threads for the all-cores figure (default: all available cores).
@@ -90,14 +92,17 @@ enum BenchCommand {
     /// for the default (1024-512) and CPU (512-256) network presets. Threads: RAYON_NUM_THREADS,
     /// else all cores.
     Learner {
+        /// Print the report as JSON.
         #[arg(long)]
         json: bool,
+        /// Timed repetitions; the report gives their median.
         #[arg(long, default_value_t = 7)]
         repetitions: usize,
     },
     /// Distributed layer: actor env steps/s with and without publishing, one vs two actor
     /// processes, and weight-broadcast latency (p50/p99) of the default network.
     Cluster {
+        /// Print the report as JSON.
         #[arg(long)]
         json: bool,
         /// Environments per actor process.

@@ -50,6 +50,8 @@ pub struct LearnerOpts {
     /// A Zenoh JSON5 configuration (TLS, authentication); explicit endpoints override its own.
     #[arg(long)]
     zenoh_config: Option<PathBuf>,
+    #[command(flatten)]
+    scenes: crate::scenes_cmd::Source,
 }
 
 impl LearnerOpts {
@@ -75,6 +77,9 @@ impl LearnerOpts {
         }
         if let Some(path) = &self.init_from {
             config.init_from = Some(path.clone());
+        }
+        if let Some(dir) = &self.scenes.scenes {
+            config.scenes = Some(dir.clone());
         }
         if let Some(path) = &self.teacher1 {
             config.teacher1 = Some(path.clone());
@@ -125,6 +130,7 @@ pub struct ActorArgs {
     /// The learner's (or a router's) endpoint, e.g. tcp/10.0.0.5:7447.
     #[arg(long, required = true, value_parser = endpoint)]
     connect: Vec<String>,
+    /// The learner's run id.
     #[arg(long, default_value = "teacher1")]
     run_id: String,
     /// teacher1, teacher2 or student.
@@ -133,6 +139,7 @@ pub struct ActorArgs {
     /// Environments stepped by this process.
     #[arg(long, default_value_t = 16, value_parser = at_least_one)]
     envs: usize,
+    /// Seed of the task draws, starts and sampled actions.
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Default: actor-<host>-<pid>.
@@ -147,8 +154,11 @@ pub struct ActorArgs {
     /// Print the actor's summary as one JSON line on stdout when it stops.
     #[arg(long, hide = true)]
     summary_json: bool,
+    /// A Zenoh JSON5 configuration (TLS, authentication); explicit endpoints override its own.
     #[arg(long)]
     zenoh_config: Option<PathBuf>,
+    #[command(flatten)]
+    scenes: crate::scenes_cmd::Source,
 }
 
 /// A count of processes or environments: 0 is an error, not silently 1.
@@ -291,6 +301,7 @@ pub fn train(args: TrainArgs) -> Result<()> {
     let mut spawn_error: Option<anyhow::Error> = None;
     let role = config.role.clone();
     let run_id = config.run_id.clone();
+    let scenes = config.scenes.clone();
     let result = run_with_progress(&config, &endpoints, demo, || {
         for i in 0..actors {
             let log = run_dir.join(format!("actor-{i}.log"));
@@ -308,6 +319,11 @@ pub fn train(args: TrainArgs) -> Result<()> {
                         .args(["--role", &role, "--envs", &args.envs.to_string()])
                         .args(["--seed", &(1000 + i as u64).to_string()])
                         .args(["--actor-id", &format!("local-{i}")])
+                        .args(
+                            scenes
+                                .iter()
+                                .flat_map(|d| [std::ffi::OsStr::new("--scenes"), d.as_os_str()]),
+                        )
                         .stdin(Stdio::null())
                         .stdout(file)
                         .stderr(err)
@@ -417,6 +433,7 @@ pub fn actor(args: ActorArgs) -> Result<()> {
         seed: args.seed,
         max_chunks: args.max_chunks,
         publish: !args.no_publish,
+        scenes: args.scenes.scenes,
     };
     match run_actor(&config) {
         Ok(summary) => {
@@ -435,6 +452,10 @@ pub fn actor(args: ActorArgs) -> Result<()> {
             Ok(())
         }
         Err(lhm_actor::service::ActorError::NoWeights) if shutdown::requested() => Ok(()),
+        Err(lhm_actor::service::ActorError::Cluster(e @ lhm_cluster::ClusterError::Stopped(_))) => {
+            tracing::info!("{e}");
+            Ok(())
+        }
         Err(e) => Err(e.into()),
     }
 }

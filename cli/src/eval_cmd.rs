@@ -5,7 +5,6 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use lhm_actor::eval::{episodes_csv, evaluate, summarize, EvalSetup, START_YAW_JITTER};
-use lhm_learner::service::TrainConfig;
 use lhm_scenes::{Benchmark, Split, Task};
 use lhm_sim::CharacterModel;
 use std::path::PathBuf;
@@ -29,7 +28,8 @@ pub struct EvalArgs {
     /// Only the first N tasks of the split (a quick look).
     #[arg(long)]
     limit: Option<usize>,
-    /// The run's training config, if it changed the environment settings.
+    /// The run's training config (default: the `config.toml` beside the checkpoint, else the
+    /// built-in default).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Print the table's keys as JSON (`success_k`, `dist_k`, `success_all`, `fall_rate`, each
@@ -42,6 +42,8 @@ pub struct EvalArgs {
     /// Environments stepped in lockstep (one batched forward pass per step).
     #[arg(long, default_value_t = 64)]
     batch: usize,
+    #[command(flatten)]
+    scenes: crate::scenes_cmd::Source,
 }
 
 fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
@@ -68,12 +70,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if a.seeds == 0 {
         bail!("--seeds must be at least 1");
     }
-    let bench = Benchmark::embedded()?;
+    let bench = a.scenes.load()?;
     let model = CharacterModel::amp_humanoid();
-    let train = match &a.config {
-        Some(path) => TrainConfig::from_toml_file(path)?,
-        None => TrainConfig::default(),
-    };
+    let train = crate::render_cmd::train_config_for(Some(&a.policy), a.config.as_deref())?;
     let learner = crate::render_cmd::load_policy(&a.policy, &train, &model)?;
     let mut tasks = split_tasks(&bench, &a.split)?;
     if a.first_pair {

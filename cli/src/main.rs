@@ -49,6 +49,9 @@ enum Command {
     Plot(plot_cmd::PlotArgs),
     /// Score a policy on a benchmark split: Success k, Dist k, Success All, falls (paper Sec. 4.1).
     Eval(eval_cmd::EvalArgs),
+    /// Make a recording cut short by a crash (SIGKILL, power loss) readable again: copies every
+    /// complete record into a new, properly finished MCAP file.
+    Recover(record_cmd::RecoverArgs),
 }
 
 /// candle allocates a fresh buffer per tensor op and glibc serves large ones with mmap, so every
@@ -64,11 +67,30 @@ fn tune_allocator() {
     }
 }
 
+/// The error and its causes on one line, each cause once: library errors that already quote
+/// their source in their message (thiserror's `"{path}: {source}"`) also return it as the source,
+/// and anyhow's `{:#}` printed such an OS error twice.
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
+}
+
 fn main() -> ExitCode {
     tune_allocator();
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| lhm_cluster::session::DEFAULT_LOG_FILTER.into()),
         )
         .with_writer(std::io::stderr)
         // Colour codes only on a terminal: logs redirected to files, containers and CI stay
@@ -82,6 +104,7 @@ fn main() -> ExitCode {
         Command::Actor(args) => cluster_cmd::actor(args).map(|()| ExitCode::SUCCESS),
         Command::Record(args) => record_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Eval(args) => eval_cmd::run(args).map(|()| ExitCode::SUCCESS),
+        Command::Recover(args) => record_cmd::recover(args).map(|()| ExitCode::SUCCESS),
         Command::Scenes(args) => scenes_cmd::run(args),
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Motion(args) => motion_cmd::run(args).map(|()| ExitCode::SUCCESS),
@@ -91,8 +114,70 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_chain(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An error that quotes its source in its message and returns it as its source too.
+    #[derive(Debug)]
+    struct Quoting {
+        path: String,
+        source: std::io::Error,
+    }
+
+    impl std::fmt::Display for Quoting {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(f, "{}: cannot read: {}", self.path, self.source)
+        }
+    }
+
+    impl std::error::Error for Quoting {
+        fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+            Some(&self.source)
+        }
+    }
+
+    #[test]
+    fn every_argument_has_help_text() {
+        use clap::CommandFactory;
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for a in cmd.get_arguments() {
+                let id = a.get_id().as_str();
+                if id == "help" || id == "version" || a.is_hide_set() {
+                    continue;
+                }
+                if a.get_help().is_none() && a.get_long_help().is_none() {
+                    missing.push(format!("{path} {id}"));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&Cli::command(), "lhm", &mut missing);
+        assert!(missing.is_empty(), "arguments without help: {missing:#?}");
+    }
+
+    #[test]
+    fn an_os_error_is_printed_once() {
+        let os = std::io::Error::from_raw_os_error(2);
+        let e = anyhow::Error::new(Quoting {
+            path: "/x/catalogue.toml".into(),
+            source: os,
+        })
+        .context("--scenes /x");
+        let line = error_chain(&e);
+        assert_eq!(line.matches("os error 2").count(), 1, "{line}");
+        assert!(
+            line.starts_with("--scenes /x: /x/catalogue.toml: cannot read"),
+            "{line}"
+        );
     }
 }

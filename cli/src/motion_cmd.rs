@@ -46,7 +46,9 @@ enum MotionCommand {
 
 #[derive(Args)]
 pub struct RenderArgs {
+    /// Clip name as `lhm motion list` prints it (e.g. walk_forward).
     clip: String,
+    /// Output file: .gif (the whole clip) or .png (one still).
     #[arg(short, long, value_name = "GIF|PNG")]
     output: PathBuf,
     /// PNG only: the still at this time (seconds from the clip's start) instead of the middle.
@@ -57,10 +59,13 @@ pub struct RenderArgs {
     /// for DeepMimic ones (they walk too far for one fixed view).
     #[arg(long, value_enum)]
     camera: Option<CameraKind>,
+    /// Clip cache (default: $LHM_MOTION_DIR, else ~/.cache/lhm/motions).
     #[arg(long)]
     dir: Option<PathBuf>,
+    /// Image width, pixels.
     #[arg(long, default_value_t = 320)]
     width: u32,
+    /// Image height, pixels.
     #[arg(long, default_value_t = 240)]
     height: u32,
 }

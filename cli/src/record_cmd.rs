@@ -7,13 +7,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::ProgressBar;
-use lhm_learner::service::TrainConfig;
 use lhm_learner::Learner;
 use lhm_nets::SplitMix64;
 use lhm_protos::{EpisodeStats, Role};
 use lhm_record::capture::{EpisodeCapture, EpisodeSource};
 use lhm_record::{record_episode, EpisodeScene};
-use lhm_scenes::Benchmark;
 use lhm_sim::env::TaskEnv;
 use lhm_sim::CharacterModel;
 
@@ -24,17 +22,21 @@ pub struct RecordArgs {
     /// Learner checkpoint: `runs/<run>/checkpoint` (with or without .json / .safetensors).
     #[arg(long)]
     policy: PathBuf,
-    /// The run's training config, if it changed the environment settings.
+    /// The run's training config (default: the `config.toml` beside the checkpoint, else the
+    /// built-in default).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Sample actions instead of taking the policy's mean.
     #[arg(long)]
     stochastic: bool,
+    /// Seed of the sampled actions (with --stochastic).
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Output MCAP file.
     #[arg(short, long)]
     output: PathBuf,
+    #[command(flatten)]
+    scenes: crate::scenes_cmd::Source,
 }
 
 /// A learner checkpoint's stem, given with or without its `.json` / `.safetensors` extension.
@@ -43,14 +45,11 @@ pub(crate) fn checkpoint_stem(path: &Path) -> PathBuf {
 }
 
 pub fn run(args: RecordArgs) -> Result<()> {
-    let config = match &args.config {
-        Some(path) => TrainConfig::from_toml_file(path)?,
-        None => TrainConfig::default(),
-    };
+    let bench = args.scenes.load()?;
+    let config = crate::render_cmd::train_config_for(Some(&args.policy), args.config.as_deref())?;
     let stem = checkpoint_stem(&args.policy);
     let learner = Learner::load(&stem, None)
         .with_context(|| format!("loading the policy {}", stem.display()))?;
-    let bench = Benchmark::embedded()?;
     let (_, task) = bench
         .task(&args.task)
         .with_context(|| format!("no task {:?} (see `lhm scenes stats`)", args.task))?;
@@ -132,6 +131,33 @@ pub fn run(args: RecordArgs) -> Result<()> {
         stats.cycles_attempted,
         if stats.fell { ", fell" } else { "" },
         args.output.display()
+    );
+    Ok(())
+}
+
+#[derive(Args)]
+pub struct RecoverArgs {
+    /// The damaged recording (e.g. runs/teacher1/run.mcap after a SIGKILL); only read.
+    input: PathBuf,
+    /// Where to write the recovered file (must differ from the input).
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+pub fn recover(a: RecoverArgs) -> Result<()> {
+    let r = lhm_record::recover::recover(&a.input, &a.output)?;
+    println!(
+        "{}: {} messages on {} channels, {} metadata records, {} attachments{}",
+        a.output.display(),
+        r.messages,
+        r.channels,
+        r.metadata,
+        r.attachments,
+        match (&r.stopped_by, r.complete) {
+            (_, true) => " (the input was whole)".to_owned(),
+            (Some(why), false) => format!(" (the input stops there: {why})"),
+            (None, false) => " (the input has no data-end record)".to_owned(),
+        }
     );
     Ok(())
 }

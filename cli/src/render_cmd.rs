@@ -1,11 +1,10 @@
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use indicatif::ProgressBar;
-use lhm_learner::service::TrainConfig;
+use lhm_learner::service::{TrainConfig, RUN_CONFIG_FILE};
 use lhm_learner::Learner;
 use lhm_scenes::raster::Canvas;
 use lhm_scenes::rng::SplitMix64;
-use lhm_scenes::Benchmark;
 use lhm_sim::env::TaskEnv;
 use lhm_sim::render::{render, write_gif, Camera};
 use lhm_sim::CharacterModel;
@@ -37,7 +36,8 @@ pub struct RenderRolloutArgs {
     /// (`runs/<run>/checkpoint`, with or without .json / .safetensors).
     #[arg(long, default_value = "zero")]
     policy: String,
-    /// The run's training config, if it changed the environment settings (checkpoints only).
+    /// The run's training config (checkpoints only; default: the `config.toml` beside the
+    /// checkpoint, else the built-in default).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Sample the trained policy's actions instead of taking its mean.
@@ -49,6 +49,8 @@ pub struct RenderRolloutArgs {
     /// An animated .gif, or a .png still of the last frame.
     #[arg(short, long, value_name = "GIF|PNG")]
     output: PathBuf,
+    #[command(flatten)]
+    scenes: crate::scenes_cmd::Source,
     /// Camera: third person or the character's eyes.
     #[arg(long, value_enum, default_value = "third")]
     view: View,
@@ -72,15 +74,16 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         Some("png") => true,
         _ => bail!("--output must end in .gif or .png"),
     };
-    let bench = Benchmark::embedded()?;
+    let bench = a.scenes.load()?;
     let (_, task) = bench
         .task(&a.task)
         .with_context(|| format!("no task {:?}", a.task))?;
     let model = CharacterModel::amp_humanoid();
-    let train = match &a.config {
-        Some(path) => TrainConfig::from_toml_file(path)?,
-        None => TrainConfig::default(),
-    };
+    let trained = !matches!(a.policy.as_str(), "zero" | "random");
+    let train = train_config_for(
+        trained.then(|| std::path::Path::new(a.policy.as_str())),
+        a.config.as_deref(),
+    )?;
     let policy = match a.policy.as_str() {
         "zero" => Policy::Zero,
         "random" => Policy::Random,
@@ -175,6 +178,29 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
 
 /// A learner checkpoint (`runs/<run>/checkpoint` or `policy`, with or without its extension) whose
 /// policy fits `train`'s environment for `model`.
+/// The configuration a checkpoint was trained with: `explicit` (`--config`) if given, else the
+/// `config.toml` its learner wrote beside it, else the built-in default (runs from before that
+/// file existed).
+pub(crate) fn train_config_for(
+    policy: Option<&std::path::Path>,
+    explicit: Option<&std::path::Path>,
+) -> Result<TrainConfig> {
+    if let Some(path) = explicit {
+        return Ok(TrainConfig::from_toml_file(path)?);
+    }
+    let beside = policy
+        .map(crate::record_cmd::checkpoint_stem)
+        .and_then(|stem| stem.parent().map(|d| d.join(RUN_CONFIG_FILE)))
+        .filter(|p| p.is_file());
+    match beside {
+        Some(path) => {
+            tracing::info!("using the run's configuration {}", path.display());
+            Ok(TrainConfig::from_toml_file(&path)?)
+        }
+        None => Ok(TrainConfig::default()),
+    }
+}
+
 pub(crate) fn load_policy(
     path: &std::path::Path,
     train: &TrainConfig,

@@ -15,17 +15,21 @@ pub struct ScenesArgs {
     command: ScenesCommand,
 }
 
-#[derive(Args)]
-struct Source {
+/// Where a command reads the benchmark's tasks: `--scenes DIR` (e.g. written by `lhm scenes
+/// generate`) or the copy built into `lhm`.
+#[derive(Args, Clone, Debug, Default)]
+pub struct Source {
     /// Read the task files from this directory instead of the copy built into `lhm`.
     #[arg(long, value_name = "DIR")]
-    scenes: Option<PathBuf>,
+    pub scenes: Option<PathBuf>,
 }
 
 impl Source {
-    fn load(&self) -> Result<Benchmark> {
+    pub fn load(&self) -> Result<Benchmark> {
         Ok(match &self.scenes {
-            Some(dir) => Benchmark::load_dir(dir)?,
+            Some(dir) => {
+                Benchmark::load_dir(dir).with_context(|| format!("--scenes {}", dir.display()))?
+            }
             None => Benchmark::embedded()?,
         })
     }
@@ -38,6 +42,7 @@ enum ScenesCommand {
         /// Directory holding catalogue.toml; the split files are written beside it.
         #[arg(long, default_value = "scenes/data")]
         dir: PathBuf,
+        /// Seed of the generator (the shipped files use the default).
         #[arg(long, default_value_t = GenerateConfig::default().seed)]
         seed: u64,
         /// Compare with the files in DIR instead of writing; exit non-zero if they differ.
@@ -54,6 +59,7 @@ enum ScenesCommand {
     },
     /// Benchmark statistics.
     Stats {
+        /// Print the statistics as JSON.
         #[arg(long)]
         json: bool,
         #[command(flatten)]
@@ -61,7 +67,9 @@ enum ScenesCommand {
     },
     /// Top-down picture of one task with its planned routes.
     Render {
+        /// Task id, e.g. train-0001.
         task: String,
+        /// Output PNG file.
         #[arg(short, long, value_name = "PNG")]
         output: PathBuf,
         #[command(flatten)]

@@ -94,7 +94,7 @@ fn open_with(
     endpoints: &Endpoints,
 ) -> ClusterResult<Session> {
     zenoh::open(config).wait().map_err(|e| {
-        ClusterError::Zenoh(format!(
+        ClusterError::zenoh(format!(
             "opening a {} session (listen {:?}, connect {:?}): {e}",
             mode.as_str(),
             endpoints.listen,
@@ -102,6 +102,15 @@ fn open_with(
         ))
     })
 }
+
+/// The log filter of the project's binaries when `RUST_LOG` is unset: our own INFO lines, zenoh's
+/// warnings, but not the orchestrator's two warnings per failed connection attempt (a waiting
+/// actor printed three lines every 0.5 s); [`open_session_retrying`] says once that it waits and
+/// then every `WAIT_REPORT_EVERY`.
+pub const DEFAULT_LOG_FILTER: &str = "info,zenoh=warn,zenoh::net::runtime::orchestrator=error";
+
+/// How often a process still waiting for its peer says so.
+pub const WAIT_REPORT_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
 
 /// Opens a session, retrying every `period` until it succeeds or `keep_trying` says stop. A bad
 /// configuration is an error at once; only failing to connect is retried.
@@ -112,18 +121,45 @@ pub fn open_session_retrying(
     mut keep_trying: impl FnMut() -> bool,
 ) -> ClusterResult<Session> {
     let config = zenoh_config(mode, endpoints)?;
-    let mut warned = false;
+    let started = std::time::Instant::now();
+    let mut last_report: Option<std::time::Instant> = None;
     loop {
         match open_with(config.clone(), mode, endpoints) {
-            Ok(s) => return Ok(s),
+            Ok(s) => {
+                if last_report.is_some() {
+                    tracing::info!(
+                        "connected to {:?} after {:.0} s",
+                        endpoints.connect,
+                        started.elapsed().as_secs_f64()
+                    );
+                }
+                return Ok(s);
+            }
             Err(e) => {
                 if !keep_trying() {
-                    return Err(e);
+                    return Err(if last_report.is_some() {
+                        ClusterError::Stopped(format!("{:?}", endpoints.connect))
+                    } else {
+                        e
+                    });
                 }
-                if !warned {
-                    tracing::info!("waiting for {:?}: {e}", endpoints.connect);
-                    warned = true;
+                match last_report {
+                    None => tracing::info!(
+                        "waiting for {:?} (nothing answers there yet; retrying every {:.1} s)",
+                        endpoints.connect,
+                        period.as_secs_f64()
+                    ),
+                    Some(t) if t.elapsed() >= WAIT_REPORT_EVERY => tracing::info!(
+                        "still waiting for {:?} ({:.0} s)",
+                        endpoints.connect,
+                        started.elapsed().as_secs_f64()
+                    ),
+                    Some(_) => {
+                        std::thread::sleep(period);
+                        continue;
+                    }
                 }
+                last_report = Some(std::time::Instant::now());
                 std::thread::sleep(period);
             }
         }

@@ -33,6 +33,8 @@ fn normalizer(norm: &RunningMeanStd) -> Normalizer {
         count: norm.count(),
         mean: norm.mean().iter().map(|&x| x as f32).collect(),
         var: norm.var().iter().map(|&x| x as f32).collect(),
+        epsilon: norm.epsilon,
+        clip: norm.clip,
     }
 }
 

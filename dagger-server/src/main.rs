@@ -15,8 +15,10 @@ struct Args {
     /// The learner's (or a router's) endpoint.
     #[arg(long, required = true)]
     connect: Vec<String>,
+    /// The run whose teachers label the student's states.
     #[arg(long, default_value = "teacher1")]
     run_id: String,
+    /// A Zenoh JSON5 configuration (TLS, authentication); explicit endpoints override its own.
     #[arg(long)]
     zenoh_config: Option<std::path::PathBuf>,
 }
@@ -24,7 +26,8 @@ struct Args {
 fn main() -> Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| lhm_cluster::session::DEFAULT_LOG_FILTER.into()),
         )
         .with_writer(std::io::stderr)
         // Colour codes only on a terminal: logs redirected to files, containers and CI stay

@@ -199,6 +199,13 @@ fn normalizer(c: &Check, field: &'static str, n: Option<&Normalizer>) -> Result 
         field,
         format_args!("mean has {mean} elements but var has {var}"),
     )?;
+    for (name, v) in [("epsilon", n.epsilon), ("clip", n.clip)] {
+        c.ensure(
+            v.is_finite() && v >= 0.0,
+            field,
+            format_args!("{name} = {v} must be finite and >= 0 (0: unset)"),
+        )?;
+    }
     c.finite(field, &n.mean)?;
     c.finite_non_negative(field, &n.var)
 }

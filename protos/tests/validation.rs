@@ -311,6 +311,12 @@ fn policy_weights_are_checked() {
         ..w()
     };
     assert_invalid(m, "obs_normalizer");
+    let mut m = w();
+    m.obs_normalizer.as_mut().unwrap().clip = -5.0;
+    assert_invalid(m, "obs_normalizer");
+    let mut m = w();
+    m.obs_normalizer.as_mut().unwrap().epsilon = f64::INFINITY;
+    assert_invalid(m, "obs_normalizer");
 }
 
 #[test]

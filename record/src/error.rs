@@ -39,6 +39,13 @@ pub enum RecordError {
         topic: String,
         source: lhm_protos::WireError,
     },
+    #[error("{}: cannot read: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: {reason}", path.display())]
+    Recover { path: PathBuf, reason: String },
     /// An episode's frames do not belong to the scene they were to be drawn in.
     #[error("{}: lhm.v1.EpisodeFrames.{field}: {reason}", path.display())]
     SceneMismatch {

@@ -12,6 +12,7 @@
 pub mod capture;
 mod error;
 mod recorder;
+pub mod recover;
 mod scene;
 
 use std::path::Path;

@@ -47,9 +47,10 @@ struct Channel {
 /// Crash safety: messages are written into compressed chunks, and a chunk is only readable once
 /// it is complete. [`McapRecorder::write_episode`] and [`McapRecorder::write_metrics`] end the
 /// current chunk and hand it to the OS before returning, so if the process dies later everything
-/// they wrote can still be read linearly (e.g. `mcap recover`, or `mcap::MessageStream` with
-/// `IgnoreEndMagic`); messages written with [`McapRecorder::write_wire`] are covered by the next
-/// such call or by [`McapRecorder::flush`]. The OS is not asked to sync to disk except at
+/// they wrote can still be read: `lhm recover` ([`crate::recover::recover`]) copies it into a
+/// whole file, or read it linearly with `mcap::MessageStream` and `IgnoreEndMagic`. Messages
+/// written with [`McapRecorder::write_wire`] are covered by the next such call or by
+/// [`McapRecorder::flush`]. The OS is not asked to sync to disk except at
 /// [`McapRecorder::finish`], so a power loss may still lose recent chunks.
 pub struct McapRecorder {
     path: PathBuf,

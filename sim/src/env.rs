@@ -42,6 +42,14 @@ pub struct EnvConfig {
     /// initialisation, as AMP/ASE/TokenHSI) instead of the task's start pose. Needs the motion
     /// clips on the actor's machine.
     pub demo_start_probability: f32,
+    /// Of those demo starts, the fraction whose heading is turned toward the first object
+    /// (± `demo_start_yaw_noise`) instead of the task's start yaw. The median object lies 93°
+    /// off the start heading, so a walking clip started along it walks away; turned toward the
+    /// object, walking on reaches it, and the policy sees from its first iteration the states
+    /// where walking pays.
+    pub demo_start_toward_object: f32,
+    /// Half-width (radians) of the uniform noise on a demo start turned toward the object.
+    pub demo_start_yaw_noise: f32,
     /// Time limit of an episode, control steps (truncation, not termination).
     pub max_episode_steps: u32,
     /// Walking and carrying speeds the reward asks for (m/s).
@@ -66,6 +74,8 @@ impl Default for EnvConfig {
             root_fall_height: 0.4,
             reach_distance: 0.6,
             demo_start_probability: 0.0,
+            demo_start_toward_object: 0.0,
+            demo_start_yaw_noise: 0.5,
             max_episode_steps: 1200,
             // The demo walks are ~1 m/s; 1.5 m/s asked for a gait no clip shows.
             walk_speed: 1.0,
@@ -201,6 +211,27 @@ impl TaskEnv {
     /// yaw), with the AMP history filled from the clip's preceding frames. For a fresh
     /// environment (before its first step).
     pub fn start_from_demo(&mut self, demo: &DemoMotion, clip: usize, t: f32) {
+        let yaw = self.task.start.yaw as f32;
+        self.start_from_demo_heading(demo, clip, t, yaw);
+    }
+
+    /// The yaw (radians about +z) from the task's start position toward the first pair's
+    /// object, or the start yaw when the task has no pair.
+    pub fn yaw_toward_first_object(&self) -> f32 {
+        let Some(o) = self.pair(0).and_then(|(i, _, _)| self.task.objects.get(i)) else {
+            return self.task.start.yaw as f32;
+        };
+        let dx = o.pos[0] - self.task.start.pos[0];
+        let dy = o.pos[1] - self.task.start.pos[1];
+        if dx.abs() + dy.abs() < 1e-9 {
+            return self.task.start.yaw as f32;
+        }
+        dy.atan2(dx) as f32
+    }
+
+    /// [`Self::start_from_demo`] with the clip's root heading turned to `yaw` instead of the
+    /// task's start yaw.
+    pub fn start_from_demo_heading(&mut self, demo: &DemoMotion, clip: usize, t: f32, yaw: f32) {
         let (states, prev) = demo.start_states(clip, t);
         let Some(root) = states.first() else { return };
         let pose = demo.pose_at(clip, t);
@@ -209,7 +240,7 @@ impl TaskEnv {
             let f = root.rot * Vector::X;
             f.y.atan2(f.x)
         };
-        let turn = Rotation::from_rotation_z(self.task.start.yaw as f32 - clip_yaw);
+        let turn = Rotation::from_rotation_z(yaw - clip_yaw);
         let start = Vector::new(
             self.task.start.pos[0] as f32,
             self.task.start.pos[1] as f32,

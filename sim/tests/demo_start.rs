@@ -102,6 +102,45 @@ fn a_demo_start_reproduces_the_clip_frame_pose_and_velocities() {
 }
 
 #[test]
+fn a_demo_start_turned_toward_the_object_faces_it() {
+    let (_, demo, mut env) = setup();
+    let t = 1.0;
+    let yaw = env.yaw_toward_first_object();
+    env.start_from_demo_heading(&demo, 0, t, yaw);
+    let root = env.world.body_states()[0];
+    let heading = root.rot * Vector::X;
+    // The direction from the root (over the task's start) to the first object.
+    let step = &env.task.sequence[0];
+    let object = env
+        .task
+        .objects
+        .iter()
+        .find(|o| o.id == step.object)
+        .unwrap();
+    let to = Vector::new(
+        (object.pos[0] - env.task.start.pos[0]) as f32,
+        (object.pos[1] - env.task.start.pos[1]) as f32,
+        0.0,
+    )
+    .normalize();
+    let h = Vector::new(heading.x, heading.y, 0.0).normalize();
+    assert!(
+        h.dot(to) > 0.999,
+        "heading {h:?} vs direction to the object {to:?}"
+    );
+    // The task's own start heading is another direction for this task, so the turn is real.
+    let start = Vector::new(
+        env.task.start.yaw.cos() as f32,
+        env.task.start.yaw.sin() as f32,
+        0.0,
+    );
+    assert!(
+        start.dot(to) < 0.99,
+        "train-0001's object lies ahead already"
+    );
+}
+
+#[test]
 fn replayed_clip_gives_the_demo_amp_frames() {
     // The environment's AMP path (backward differences of poses one control step apart) on a
     // kinematic replay equals DemoMotion's features frame for frame.

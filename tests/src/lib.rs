@@ -226,6 +226,63 @@ pub fn proc_state(pid: i32) -> Option<(char, i32)> {
     Some((state, ppid))
 }
 
+/// CPU time (user + system, clock ticks) a process has used, from /proc/PID/stat.
+pub fn cpu_ticks(pid: i32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let rest = &stat[stat.rfind(')')? + 2..];
+    // After the comm: state(0) ppid(1) ... utime(11) stime(12).
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: u64 = fields.get(11)?.parse().ok()?;
+    let stime: u64 = fields.get(12)?.parse().ok()?;
+    Some(utime + stime)
+}
+
+/// Clock ticks per second (the unit of [`cpu_ticks`]).
+pub fn ticks_per_second() -> u64 {
+    // SAFETY: sysconf has no preconditions.
+    let t = unsafe { libc::sysconf(libc::_SC_CLK_TCK) };
+    if t > 0 {
+        t as u64
+    } else {
+        100
+    }
+}
+
+/// Polls a log file until it contains `needle`; panics with the log on timeout.
+pub fn wait_for_log(path: &Path, needle: &str, timeout: Duration) -> String {
+    let deadline = Instant::now() + timeout;
+    loop {
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        if text.contains(needle) {
+            return text;
+        }
+        if Instant::now() >= deadline {
+            panic!(
+                "{} never said {needle:?} within {timeout:?}:\n{text}",
+                path.display()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// A Python that can import `module` (`$LHM_PYTHON`, `~/.cache/lhm/python`, or `python3`).
+pub fn python_with(module: &str) -> Option<String> {
+    let candidates = [
+        std::env::var("LHM_PYTHON").ok(),
+        std::env::var("HOME")
+            .ok()
+            .map(|h| format!("{h}/.cache/lhm/python/bin/python")),
+        Some("python3".to_owned()),
+    ];
+    candidates.into_iter().flatten().find(|p| {
+        Command::new(p)
+            .args(["-c", &format!("import {module}")])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    })
+}
+
 /// Gone, or a zombie waiting for whoever reaps orphans.
 pub fn exited(pid: i32) -> bool {
     proc_state(pid).is_none_or(|(state, _)| state == 'Z')

@@ -62,3 +62,64 @@ fn zero_counts_and_malformed_endpoints_are_refused_clearly() {
         "{stderr}"
     );
 }
+
+/// `--scenes DIR` on the commands that take a task: a directory that is not a benchmark is a
+/// clear error naming it; the repository's own scene files work as the built-in copy does.
+#[test]
+fn scenes_dir_is_read_or_refused_by_name() {
+    let dir = std::env::temp_dir().join(format!("lhm-scenes-arg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let png = dir.join("t.png");
+    let png = png.display().to_string();
+    let missing = dir.join("no-such-scenes").display().to_string();
+    let policy = dir.join("no-policy").display().to_string();
+    for args in [
+        vec![
+            "render-rollout",
+            "train-0001",
+            "-o",
+            &png,
+            "--scenes",
+            &missing,
+        ],
+        vec!["eval", "--policy", &policy, "--scenes", &missing],
+        vec![
+            "record",
+            "train-0001",
+            "--policy",
+            &policy,
+            "-o",
+            &png,
+            "--scenes",
+            &missing,
+        ],
+    ] {
+        let out = Command::new(lhm())
+            .args(&args)
+            .output()
+            .expect("running lhm");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(stderr.contains("no-such-scenes"), "{args:?}: {stderr}");
+    }
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/data");
+    let out = Command::new(lhm())
+        .args([
+            "render-rollout",
+            "train-0001",
+            "--seconds",
+            "0.1",
+            "-o",
+            &png,
+        ])
+        .args(["--scenes", data])
+        .output()
+        .expect("running lhm");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(std::fs::metadata(&png).is_ok_and(|m| m.len() > 0));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -100,6 +100,64 @@ fn a_restarted_learner_resumes_and_running_actors_reconnect() {
         checkpointed >= 2,
         "checkpoint every 2 iterations: {checkpointed}"
     );
+    // The killed learner's recording has no summary and no end magic; `lhm recover` makes a
+    // file the strict readers accept (the Python `mcap` reader too, where installed).
+    let recovered = dir.join("recovered.mcap");
+    let out = std::process::Command::new(lhm())
+        .args([
+            "recover",
+            &dir.join("runs/e2e/run.mcap").display().to_string(),
+        ])
+        .args(["-o", &recovered.display().to_string()])
+        .output()
+        .expect("running lhm recover");
+    let said = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{said}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let messages: u64 = said
+        .split(": ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("lhm recover said {said:?}"));
+    assert!(messages > 0, "{said}");
+    if let Some(py) = python_with("mcap") {
+        let script = "import sys\nfrom mcap.reader import make_reader\n\
+                      with open(sys.argv[1], 'rb') as f:\n    \
+                      print(sum(1 for _ in make_reader(f).iter_messages()))\n";
+        let read = std::process::Command::new(py)
+            .args(["-c", script, &recovered.display().to_string()])
+            .output()
+            .expect("running python");
+        assert!(
+            read.status.success(),
+            "{}",
+            String::from_utf8_lossy(&read.stderr)
+        );
+        let n: u64 = String::from_utf8_lossy(&read.stdout)
+            .trim()
+            .parse()
+            .unwrap();
+        assert_eq!(n, messages, "the Python reader's count");
+    } else {
+        eprintln!(
+            "SKIP the Python mcap reader: no Python with `mcap` (scripts/install-python-examples)"
+        );
+    }
+    // The orphaned actor says its learner is gone and stops simulating (so it sends nothing)
+    // within a bounded time: its CPU use over 3 s stays near nothing.
+    let actor_log = dir.join("steady.log");
+    wait_for_log(&actor_log, "gone for", Duration::from_secs(60));
+    let before = cpu_ticks(actor.pid()).expect("the actor runs");
+    std::thread::sleep(Duration::from_secs(3));
+    let used = cpu_ticks(actor.pid()).expect("the actor runs") - before;
+    assert!(
+        used * 10 < 3 * ticks_per_second(),
+        "a paused actor used {used} ticks of CPU in 3 s"
+    );
 
     let _learner = start_learner(&dir, &config, port, "learner-2.log");
     let resumed = wait_for(&dir, "the restarted learner", LONG, |s| {
@@ -114,6 +172,45 @@ fn a_restarted_learner_resumes_and_running_actors_reconnect() {
         |s| u64_at(s, "/iteration") >= checkpointed + 2 && alive(s) == ["steady"],
     );
     assert!(actor.is_running(), "the actor was never restarted");
+    wait_for_log(&actor_log, "resumes", Duration::from_secs(10));
+}
+
+#[test]
+fn a_waiting_actor_says_so_once_not_three_lines_every_half_second() {
+    let dir = scratch_dir("waiting-actor");
+    let port = free_port();
+    let log = dir.join("waiting.log");
+    let file = std::fs::File::create(&log).expect("log file");
+    // The binaries' own default log filter (no RUST_LOG), as a user starting an actor sees it.
+    let child = std::process::Command::new(lhm())
+        .args([
+            "actor",
+            "--connect",
+            &format!("tcp/127.0.0.1:{port}"),
+            "--run-id",
+            "e2e",
+            "--envs",
+            "1",
+        ])
+        .env_remove("RUST_LOG")
+        .stdin(std::process::Stdio::null())
+        .stdout(file.try_clone().expect("log file"))
+        .stderr(file)
+        .spawn()
+        .expect("starting an actor");
+    let mut actor = Proc {
+        child,
+        name: "waiting".into(),
+    };
+    std::thread::sleep(Duration::from_secs(4));
+    actor.signal(libc::SIGTERM);
+    actor.wait_exit(Duration::from_secs(10));
+    let text = std::fs::read_to_string(&log).unwrap_or_default();
+    let lines = text.lines().count();
+    // Eight connection attempts in 4 s: before, 3 lines each.
+    assert!(lines <= 3, "{lines} lines in 4 s of waiting:\n{text}");
+    assert!(text.contains("waiting for"), "{text}");
+    assert!(!text.contains("orchestrator"), "{text}");
 }
 
 fn chunk(version: u64) -> TrajectoryChunk {

@@ -46,6 +46,9 @@ pub struct TrainConfig {
     /// layout required) instead of random weights; optimiser and discriminator start fresh. A
     /// run that already has its own checkpoint resumes from that and ignores this.
     pub init_from: Option<PathBuf>,
+    /// The benchmark's task files from this directory instead of the copy built in (`--scenes`);
+    /// `lhm train` gives it to its actors too (remote actors take their own `--scenes`).
+    pub scenes: Option<PathBuf>,
     /// Runs live in `<runs_dir>/<run_id>/` (checkpoint, status.json, run.mcap).
     pub runs_dir: PathBuf,
     /// Transitions per PPO update.
@@ -107,6 +110,7 @@ impl Default for TrainConfig {
             role: "teacher1".into(),
             teacher1: None,
             init_from: None,
+            scenes: None,
             runs_dir: PathBuf::from("runs"),
             batch_steps: 4096,
             // Two free-running actors on 2 cores made half the chunks one version stale at lag 1;
@@ -207,6 +211,23 @@ impl TrainConfig {
         Ok(())
     }
 
+    /// Writes the whole configuration (defaults filled in) to `<run dir>/config.toml`, replacing
+    /// the file by one rename, so a run directory says how its policy was trained: `lhm eval`
+    /// and `lhm render-rollout` read it beside the checkpoint.
+    pub fn write_run_config(&self, run_dir: &Path) -> Result<PathBuf, ServiceError> {
+        let path = run_dir.join(RUN_CONFIG_FILE);
+        let text = toml::to_string(self)
+            .map_err(|e| ServiceError::Config(format!("cannot write the run's config: {e}")))?;
+        let tmp = run_dir.join(format!(".tmp-{RUN_CONFIG_FILE}"));
+        let io = |source| ServiceError::Io {
+            path: path.clone(),
+            source,
+        };
+        std::fs::write(&tmp, text).map_err(io)?;
+        std::fs::rename(&tmp, &path).map_err(io)?;
+        Ok(path)
+    }
+
     pub fn learner_config(&self) -> LearnerConfig {
         let spec = self.run_spec();
         LearnerConfig {
@@ -244,6 +265,9 @@ impl TrainConfig {
         })
     }
 }
+
+/// The run's configuration in its directory (see [`TrainConfig::write_run_config`]).
+pub const RUN_CONFIG_FILE: &str = "config.toml";
 
 /// Lays `top` over `base`: tables merge key by key, any other value replaces.
 fn overlay(base: &mut toml::Table, top: toml::Table) {
@@ -514,7 +538,7 @@ struct RunRecording {
 }
 
 impl RunRecording {
-    fn open(path: PathBuf) -> Self {
+    fn open(path: PathBuf, scenes: Option<&Path>) -> Self {
         let recorder = McapRecorder::create(&path)
             .map_err(|e| tracing::warn!("not recording: {e}"))
             .ok();
@@ -523,9 +547,12 @@ impl RunRecording {
         }
         Self {
             recorder,
-            bench: Benchmark::embedded()
-                .map_err(|e| tracing::warn!("no scenes for recording: {e}"))
-                .ok(),
+            bench: match scenes {
+                Some(dir) => Benchmark::load_dir(dir),
+                None => Benchmark::embedded(),
+            }
+            .map_err(|e| tracing::warn!("no scenes for recording: {e}"))
+            .ok(),
             model: CharacterModel::amp_humanoid(),
         }
     }
@@ -612,6 +639,7 @@ pub fn run_learner(
         path: run_dir.clone(),
         source,
     })?;
+    config.write_run_config(&run_dir)?;
     let stem = checkpoint_stem(&run_dir);
     let learner_config = config.learner_config();
     let (mut learner, resumed) = if stem.with_extension("json").is_file() {
@@ -680,7 +708,7 @@ pub fn run_learner(
         .declare_subscriber(keys::episode_all(&config.run_id, role))
         .wait()
         .map_err(zerr)?;
-    let mut recording = RunRecording::open(recording_path(&run_dir));
+    let mut recording = RunRecording::open(recording_path(&run_dir), config.scenes.as_deref());
     let mut metrics_csv = metrics_csv::MetricsCsv::open(&run_dir.join("metrics.csv"))
         .map_err(|e| tracing::warn!("no metrics.csv: {e}"))
         .ok();
@@ -1011,6 +1039,27 @@ mod tests {
         let err = parse("run_id = \n").unwrap_err().to_string();
         assert!(err.contains("lhm-train-config"), "{err}");
         assert!(parse("role = \"critic\"\n").unwrap().role().is_err());
+    }
+
+    /// The config.toml a run writes reads back as the same configuration, options and
+    /// non-default settings included.
+    #[test]
+    fn the_run_config_file_reads_back_as_the_run_config() {
+        let mut c =
+            parse("[env]\ndemo_start_toward_object = 0.75\n[ppo]\nkl_target = 0.01\n").unwrap();
+        c.env.weights.locomotion = 0.5;
+        c.amp.style_cap_floor = Some(0.4);
+        let dir = std::env::temp_dir().join(format!("lhm-run-config-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = c.write_run_config(&dir).unwrap();
+        let back = TrainConfig::from_toml_file(&path).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+        assert_eq!(back.env, c.env);
+        assert_eq!(back.ppo.kl_target, Some(0.01));
+        assert_eq!(
+            toml::to_string(&back).unwrap(),
+            toml::to_string(&c).unwrap()
+        );
     }
 
     /// A teacher2 run names its Teacher 1; one that does not fit the run's observations is

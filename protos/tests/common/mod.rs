@@ -116,6 +116,8 @@ pub fn sample_weights() -> PolicyWeights {
         count: 1.5e7,
         mean: rng.floats(dim, 1.0),
         var: (0..dim).map(|_| 1.0 + rng.unit().abs()).collect(),
+        epsilon: 1e-5,
+        clip: 5.0,
     };
     PolicyWeights {
         run_id: "run-2024-06-01-a".into(),
