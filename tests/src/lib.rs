@@ -176,8 +176,22 @@ pub fn start_actor(dir: &Path, port: u16, id: &str, seed: u64) -> Proc {
     spawn(id, &args, &dir.join(format!("{id}.log")))
 }
 
-/// `lhm train` on loopback with `--no-amp`, `actors` actor processes of 2 environments each.
+/// A copy of the repository's scene files in `dir/scenes` (for `--scenes`).
+pub fn copy_scenes(dir: &Path) -> PathBuf {
+    let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/data");
+    let to = dir.join("scenes");
+    std::fs::create_dir_all(&to).expect("scenes dir");
+    for entry in std::fs::read_dir(&from).expect("scenes/data") {
+        let entry = entry.expect("scenes/data entry");
+        std::fs::copy(entry.path(), to.join(entry.file_name())).expect("copying a scene file");
+    }
+    to
+}
+
+/// `lhm train` on loopback with `--no-amp`, `actors` actor processes of 2 environments each,
+/// reading the tasks from a copy of the scene files (`--scenes`, passed on to its actors).
 pub fn start_train(dir: &Path, config: &Path, actors: usize) -> Proc {
+    let scenes = copy_scenes(dir);
     let args: Vec<String> = [
         "train",
         "--config",
@@ -189,6 +203,8 @@ pub fn start_train(dir: &Path, config: &Path, actors: usize) -> Proc {
         &actors.to_string(),
         "--envs",
         "2",
+        "--scenes",
+        &scenes.display().to_string(),
     ]
     .iter()
     .map(|s| s.to_string())

@@ -307,6 +307,15 @@ fn a_killed_lhm_train_takes_its_actor_processes_with_it() {
     });
     let actors = children_of(train.pid());
     assert_eq!(actors.len(), 2, "actor processes of lhm train: {actors:?}");
+    // `--scenes` reached the actors (which then trained from those files) and the run's config.
+    let scenes = dir.join("scenes").display().to_string();
+    for &pid in &actors {
+        let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+        let cmdline = String::from_utf8_lossy(&cmdline).replace('\0', " ");
+        assert!(cmdline.contains(&format!("--scenes {scenes}")), "{cmdline}");
+    }
+    let run_config = std::fs::read_to_string(dir.join("runs/e2e/config.toml")).unwrap_or_default();
+    assert!(run_config.contains(&scenes), "{run_config}");
     // Logs written to files are plain text: a progress line per iteration, no colour codes.
     let read = |p: &std::path::Path| std::fs::read_to_string(p).unwrap_or_default();
     let deadline = std::time::Instant::now() + Duration::from_secs(30);
