@@ -94,6 +94,21 @@ pub struct EvalSetup<'a> {
     pub batch: usize,
 }
 
+impl EvalSetup<'_> {
+    /// The environment of the `(task, seed)` episode, exactly as [`evaluate`] runs it: the
+    /// seeded start, no demo start, and a time limit of every pair's cycle limit.
+    pub fn env_for(&self, task: &Task, seed: u64) -> TaskEnv {
+        let task = seeded_task(task, seed);
+        let pairs = task.sequence.len() as u32;
+        let config = EnvConfig {
+            max_episode_steps: pairs * self.env.switching.max_cycle_steps + EPISODE_SLACK_STEPS,
+            demo_start_probability: 0.0,
+            ..self.env.clone()
+        };
+        TaskEnv::new(self.model, &task, self.catalogue, self.sim.clone(), config)
+    }
+}
+
 /// Runs every `(task, seed)` job with `ac`'s mean actions, `setup.batch` environments at a time;
 /// `progress` is called with the number of episodes finished so far. Results keep the jobs'
 /// order. Each episode may run every pair's cycle time limit (`env.switching.max_cycle_steps`).
@@ -103,32 +118,17 @@ pub fn evaluate(
     jobs: &[(Task, u64)],
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<EpisodeEval>, NetError> {
-    let EvalSetup {
-        model,
-        catalogue,
-        sim,
-        env,
-        batch,
-    } = *setup;
+    let batch = setup.batch;
     let act_dim = ac.act_dim();
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(batch.max(1)) {
         let mut slots: Vec<Slot> = chunk
             .par_iter()
-            .map(|(task, seed)| {
-                let task = seeded_task(task, *seed);
-                let pairs = task.sequence.len() as u32;
-                let config = EnvConfig {
-                    max_episode_steps: pairs * env.switching.max_cycle_steps + EPISODE_SLACK_STEPS,
-                    demo_start_probability: 0.0,
-                    ..env.clone()
-                };
-                Slot {
-                    env: TaskEnv::new(model, &task, catalogue, sim.clone(), config),
-                    seed: *seed,
-                    action: vec![0.0; act_dim],
-                    result: None,
-                }
+            .map(|(task, seed)| Slot {
+                env: setup.env_for(task, *seed),
+                seed: *seed,
+                action: vec![0.0; act_dim],
+                result: None,
             })
             .collect();
         loop {

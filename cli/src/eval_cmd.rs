@@ -6,6 +6,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use lhm_actor::eval::{episodes_csv, evaluate, summarize, EvalSetup, START_YAW_JITTER};
 use lhm_scenes::{Benchmark, Split, Task};
+use lhm_sim::render::{write_gif, Camera};
 use lhm_sim::CharacterModel;
 use std::path::PathBuf;
 
@@ -42,6 +43,10 @@ pub struct EvalArgs {
     /// Environments stepped in lockstep (one batched forward pass per step).
     #[arg(long, default_value_t = 64)]
     batch: usize,
+    /// Also write a GIF of each of the first N episodes (mean actions, third person, until the
+    /// episode ends; 10 fps) into the --output directory, named `<task>-s<seed>.gif`.
+    #[arg(long, default_value_t = 0)]
+    gifs: usize,
     #[command(flatten)]
     scenes: crate::scenes_cmd::Source,
 }
@@ -69,6 +74,9 @@ fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
 pub fn run(a: EvalArgs) -> Result<()> {
     if a.seeds == 0 {
         bail!("--seeds must be at least 1");
+    }
+    if a.gifs > 0 && a.output.is_none() {
+        bail!("--gifs needs --output DIR (where the GIFs go)");
     }
     let bench = a.scenes.load()?;
     let model = CharacterModel::amp_humanoid();
@@ -146,6 +154,34 @@ pub fn run(a: EvalArgs) -> Result<()> {
         write("episodes.csv", episodes_csv(&episodes))?;
         write("table.md", markdown.clone())?;
         write("table.json", serde_json::to_string_pretty(&json)?)?;
+        for (task, seed) in jobs.iter().take(a.gifs) {
+            let path = dir.join(format!("{}-s{seed}.gif", task.id));
+            let mut env = setup.env_for(task, *seed);
+            let steps = env.config.max_episode_steps as usize;
+            let camera = |w: &lhm_sim::world::World| Camera::third_person(w, 240, 180);
+            let shot = crate::render_cmd::Shot {
+                steps,
+                every: 3,
+                camera: &camera,
+                third_person: true,
+                past_end: false,
+            };
+            let filmed = crate::render_cmd::film(
+                &mut env,
+                &shot,
+                &mut |env| Ok(learner.actor_critic.act_deterministic(&env.observation())?),
+                &mut || {},
+            )?;
+            let file = std::fs::File::create(&path)
+                .with_context(|| format!("creating {}", path.display()))?;
+            write_gif(&filmed.frames, 10, std::io::BufWriter::new(file))?;
+            eprintln!(
+                "wrote {} ({} frames){}",
+                path.display(),
+                filmed.frames.len(),
+                filmed.end.map(|e| format!(": {e}")).unwrap_or_default()
+            );
+        }
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&json)?);

@@ -103,53 +103,45 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
     let mut rng = SplitMix64::new(a.seed);
     let mut net_rng = lhm_nets::SplitMix64::new(a.seed);
     let steps = (a.seconds * train.sim.control_hz).round() as usize;
-    // Every other control step: a 15 fps GIF.
     let bar = ProgressBar::new(steps as u64);
-    let mut frames = Vec::new();
-    let mut ended = false;
-    for step in 0..steps {
-        let action: Vec<f32> = match &policy {
-            Policy::Zero => vec![0.0; model.dofs.len()],
-            Policy::Random => (0..model.dofs.len())
-                .map(|_| rng.range(-1.0, 1.0) as f32)
-                .collect(),
-            Policy::Trained(l) => {
-                let obs = env.observation();
-                if a.stochastic {
-                    l.actor_critic.act(&obs, &mut net_rng)?.actions
-                } else {
-                    l.actor_critic.act_deterministic(&obs)?
+    let (width, height, view) = (a.width, a.height, a.view);
+    let camera = |w: &lhm_sim::world::World| match view {
+        View::Third => Camera::third_person(w, width, height),
+        View::Ego => Camera::egocentric(w, width, height),
+    };
+    let shot = Shot {
+        steps,
+        // Every other control step: a 15 fps GIF.
+        every: 2,
+        camera: &camera,
+        third_person: matches!(view, View::Third),
+        past_end: a.past_end,
+    };
+    let filmed = film(
+        &mut env,
+        &shot,
+        &mut |env| {
+            Ok(match &policy {
+                Policy::Zero => vec![0.0; model.dofs.len()],
+                Policy::Random => (0..model.dofs.len())
+                    .map(|_| rng.range(-1.0, 1.0) as f32)
+                    .collect(),
+                Policy::Trained(l) => {
+                    let obs = env.observation();
+                    if a.stochastic {
+                        l.actor_critic.act(&obs, &mut net_rng)?.actions
+                    } else {
+                        l.actor_critic.act_deterministic(&obs)?
+                    }
                 }
-            }
-        };
-        if step % 2 == 0 {
-            let camera = match a.view {
-                View::Third => Camera::third_person(&env.world, a.width, a.height),
-                View::Ego => Camera::egocentric(&env.world, a.width, a.height),
-            };
-            frames.push(render(&env.world, &camera, matches!(a.view, View::Third)));
-        }
-        let r = env.step(&action);
-        if r.physics_invalid {
-            tracing::warn!("physics guard tripped at step {step}; stopping the rollout");
-            break;
-        }
-        if (r.done || r.truncated) && !ended {
-            ended = true;
-            println!(
-                "episode ended at step {} ({:.2} s): fell {}, reached the object {}, pairs succeeded {}",
-                step + 1,
-                (step + 1) as f32 / train.sim.control_hz,
-                r.fell,
-                env.reached,
-                env.cycles.results.iter().filter(|c| c.success).count()
-            );
-            if !a.past_end {
-                break;
-            }
-        }
-        bar.inc(1);
+            })
+        },
+        &mut || bar.inc(1),
+    )?;
+    if let Some(end) = &filmed.end {
+        println!("{end}");
     }
+    let mut frames = filmed.frames;
     bar.finish_and_clear();
     let file = std::fs::File::create(&a.output)
         .with_context(|| format!("creating {}", a.output.display()))?;
@@ -174,6 +166,69 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         a.height
     );
     Ok(())
+}
+
+/// What [`film`] shot: the frames, and how the episode ended (if it did).
+pub(crate) struct Filmed {
+    pub frames: Vec<lhm_sim::render::Image>,
+    pub end: Option<String>,
+}
+
+type Act<'a> = dyn FnMut(&TaskEnv) -> Result<Vec<f32>> + 'a;
+
+/// How [`film`] shoots: up to `steps` control steps, one frame every `every` steps through
+/// `camera`, walls cut away for a `third_person` view, on after the episode's end if `past_end`.
+pub(crate) struct Shot<'a> {
+    pub steps: usize,
+    pub every: usize,
+    pub camera: &'a dyn Fn(&lhm_sim::world::World) -> Camera,
+    pub third_person: bool,
+    pub past_end: bool,
+}
+
+/// Steps `env` with `act` as `shot` says, rendering its frames.
+pub(crate) fn film(
+    env: &mut TaskEnv,
+    shot: &Shot<'_>,
+    act: &mut Act<'_>,
+    on_step: &mut dyn FnMut(),
+) -> Result<Filmed> {
+    let Shot {
+        steps,
+        every,
+        camera,
+        third_person,
+        past_end,
+    } = *shot;
+    let mut frames = Vec::new();
+    let mut end = None;
+    for step in 0..steps {
+        let action = act(env)?;
+        if step % every.max(1) == 0 {
+            frames.push(render(&env.world, &camera(&env.world), third_person));
+        }
+        let r = env.step(&action);
+        if r.physics_invalid {
+            tracing::warn!("physics guard tripped at step {step}; stopping the rollout");
+            break;
+        }
+        if (r.done || r.truncated) && end.is_none() {
+            let hz = env.world.config.control_hz;
+            end = Some(format!(
+                "episode ended at step {} ({:.2} s): fell {}, reached the object {}, pairs succeeded {}",
+                step + 1,
+                (step + 1) as f32 / hz,
+                r.fell,
+                env.reached,
+                env.cycles.results.iter().filter(|c| c.success).count()
+            ));
+            if !past_end {
+                break;
+            }
+        }
+        on_step();
+    }
+    Ok(Filmed { frames, end })
 }
 
 /// A learner checkpoint (`runs/<run>/checkpoint` or `policy`, with or without its extension) whose

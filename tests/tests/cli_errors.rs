@@ -102,6 +102,16 @@ fn scenes_dir_is_read_or_refused_by_name() {
         assert!(!out.status.success(), "{args:?} succeeded");
         assert!(stderr.contains("no-such-scenes"), "{args:?}: {stderr}");
     }
+    let out = Command::new(lhm())
+        .args(["eval", "--policy", &policy, "--gifs", "2"])
+        .output()
+        .expect("running lhm");
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--gifs needs --output"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let data = concat!(env!("CARGO_MANIFEST_DIR"), "/../scenes/data");
     let out = Command::new(lhm())
         .args([

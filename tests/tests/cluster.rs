@@ -45,6 +45,40 @@ fn two_actors_advance_the_policy_version() {
         "the checkpoint on SIGTERM holds the last iteration"
     );
     assert!(dir.join("runs/e2e/run.mcap").is_file());
+    // The checkpoint evaluates with the run's own config.toml (no --config), and --gifs films
+    // the first episode.
+    let out_dir = dir.join("eval");
+    let eval = std::process::Command::new(lhm())
+        .args([
+            "eval",
+            "--policy",
+            &dir.join("runs/e2e/policy").display().to_string(),
+        ])
+        .args([
+            "--split",
+            "unseen",
+            "--first-pair",
+            "--limit",
+            "1",
+            "--seeds",
+            "1",
+        ])
+        .args([
+            "--json",
+            "--gifs",
+            "1",
+            "-o",
+            &out_dir.display().to_string(),
+        ])
+        .output()
+        .expect("running lhm eval");
+    let stderr = String::from_utf8_lossy(&eval.stderr);
+    assert!(eval.status.success(), "{stderr}");
+    assert!(stderr.contains("config.toml"), "{stderr}");
+    let table: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
+    assert_eq!(table["episodes"], 1, "{table}");
+    let gif = std::fs::read(out_dir.join("unseen-001.p1-s0.gif")).expect("the GIF");
+    assert!(gif.starts_with(b"GIF89a"), "not a GIF");
 }
 
 #[test]
