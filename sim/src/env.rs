@@ -19,6 +19,7 @@ use lhm_scenes::{Catalogue, Task};
 use rapier3d::math::Rotation;
 use rapier3d::math::Vector;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -57,6 +58,11 @@ pub struct EnvConfig {
     pub carry_speed: f32,
     /// Height (m) an object should be lifted to count as lifted.
     pub lift_height: f32,
+    /// With `weights.imitation` > 0: seconds after a demo start during which the imitation term
+    /// tracks the start's clip (looped clips repeat; others end the track at their end). A demo
+    /// start hands the policy a gait that open-loop replay loses within ~1 s (RESULTS.md, fourth
+    /// session); tracking it says what to do at every step of that gait, DeepMimic-style.
+    pub imitation_seconds: f32,
 }
 
 impl Default for EnvConfig {
@@ -81,13 +87,14 @@ impl Default for EnvConfig {
             walk_speed: 1.0,
             carry_speed: 1.0,
             lift_height: 0.3,
+            imitation_seconds: 3.0,
         }
     }
 }
 
 impl RewardTerms {
     /// Each term times its weight, by name (their sum is the step's task reward).
-    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 10] {
+    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 11] {
         [
             ("locomotion", w.locomotion * self.locomotion),
             ("facing", w.facing * self.facing),
@@ -99,6 +106,7 @@ impl RewardTerms {
             ("release_retreat", w.release_retreat * self.release_retreat),
             ("success", w.success * self.success),
             ("alive", w.alive * self.alive),
+            ("imitation", w.imitation * self.imitation),
         ]
     }
 }
@@ -106,6 +114,7 @@ impl RewardTerms {
 /// Each task reward term of a step, before weighting (for logging).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RewardTerms {
+    pub imitation: f32,
     pub locomotion: f32,
     pub hands: f32,
     pub lift: f32,
@@ -154,6 +163,11 @@ pub struct TaskEnv {
     prev_bodies: Vec<BodyState>,
     /// The episode started from a reference-motion frame.
     pub demo_start: bool,
+    /// After a demo start with the imitation term on: entry k is where the clip puts every body
+    /// after control step k + 1, placed as the start placed the character.
+    reference: Arc<Vec<Vec<BodyState>>>,
+    /// Feet and hands, for the imitation term.
+    end_effectors: Vec<usize>,
 }
 
 /// Snapshot of a whole environment: world, cycle state, AMP history, counters.
@@ -165,6 +179,8 @@ pub struct EnvSnapshot {
     steps: u32,
     prev_bodies: Vec<BodyState>,
     reached: bool,
+    demo_start: bool,
+    reference: Arc<Vec<Vec<BodyState>>>,
 }
 
 impl TaskEnv {
@@ -203,6 +219,11 @@ impl TaskEnv {
             reached: false,
             prev_bodies,
             demo_start: false,
+            reference: Arc::default(),
+            end_effectors: ["left_foot", "right_foot", "left_hand", "right_hand"]
+                .iter()
+                .filter_map(|name| model.body_index(name))
+                .collect(),
         }
     }
 
@@ -264,6 +285,16 @@ impl TaskEnv {
         self.prev_bodies = prev.iter().map(moved).collect();
         self.amp.fill(demo.amp_history_at(clip, t));
         self.demo_start = true;
+        if self.config.weights.imitation > 0.0 {
+            let dt = 1.0 / self.world.config.control_hz;
+            let steps = (self.config.imitation_seconds.max(0.0) / dt).round() as usize;
+            self.reference = Arc::new(
+                demo.reference_track(clip, t, steps, dt)
+                    .iter()
+                    .map(|frame| frame.iter().map(moved).collect())
+                    .collect(),
+            );
+        }
     }
 
     pub fn obs_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
@@ -368,6 +399,10 @@ impl TaskEnv {
         self.prev_bodies.clone_from(&bodies);
         let mut terms = RewardTerms {
             power: self.power(&bodies, &targets),
+            imitation: self
+                .reference
+                .get(self.steps as usize - 1)
+                .map_or(0.0, |r| rewards::imitation(&bodies, r, &self.end_effectors)),
             ..RewardTerms::default()
         };
         let mut handoff = Handoff::Done;
@@ -502,6 +537,8 @@ impl TaskEnv {
             steps: self.steps,
             prev_bodies: self.prev_bodies.clone(),
             reached: self.reached,
+            demo_start: self.demo_start,
+            reference: Arc::clone(&self.reference),
         }
     }
 
@@ -512,5 +549,7 @@ impl TaskEnv {
         self.steps = s.steps;
         self.prev_bodies = s.prev_bodies.clone();
         self.reached = s.reached;
+        self.demo_start = s.demo_start;
+        self.reference = Arc::clone(&s.reference);
     }
 }

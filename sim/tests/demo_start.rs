@@ -172,3 +172,98 @@ fn replayed_clip_gives_the_demo_amp_frames() {
         assert!(worst < 1e-4, "frame {k}: max difference {worst}");
     }
 }
+
+#[test]
+fn a_looped_clip_repeats_past_its_end_moved_by_its_own_cycle_and_others_stop() {
+    let (model, mut demo, _) = setup();
+    let dt = 1.0 / 30.0;
+    let period = 89.0 / 30.0;
+    // Not looped: a start 0.51 s before the end tracks 15 steps and stops.
+    let track = demo.reference_track(0, period - 0.51, 60, dt);
+    assert_eq!(track.len(), 15, "{}", track.len());
+    demo.set_looped(0, true);
+    let t0 = period - 0.5;
+    let track = demo.reference_track(0, t0, 60, dt);
+    assert_eq!(track.len(), 60);
+    // One period after its end, the clip's first-frame pose moved by its own cycle: the root
+    // heading has turned by the clip's 0.3 rad/s × period and the root has moved on.
+    let k = ((period + 1.0 - t0) / dt).round() as usize - 1; // t = period + 1 s
+    let first_pass = demo.body_states_at(0, 1.0);
+    let second = &track[k];
+    let yaw = |r: Rotation| {
+        let f = r * Vector::X;
+        f.y.atan2(f.x)
+    };
+    let turn = 0.3 * period;
+    let dyaw = (yaw(second[0].rot) - yaw(first_pass[0].rot) - turn).sin();
+    assert!(dyaw.abs() < 1e-3, "heading off by {dyaw}");
+    // Cycle move: the root frame of frame 0 onto the last frame's.
+    let p0 = forward_kinematics(&model, &demo.pose_at(0, 0.0))[0].0;
+    let pn = forward_kinematics(&model, &demo.pose_at(0, period))[0].0;
+    let step = Rotation::from_rotation_z(turn);
+    let want =
+        Vector::new(pn.x, pn.y, 0.0) + step * (first_pass[0].pos - Vector::new(p0.x, p0.y, 0.0));
+    assert!(
+        (second[0].pos - want).length() < 1e-3,
+        "{:?} vs {want:?}",
+        second[0].pos
+    );
+    // Heights and joint angles repeat unchanged.
+    assert!((second[0].pos.z - first_pass[0].pos.z).abs() < 1e-5);
+    let a = joint_angles(&model, second);
+    let b = joint_angles(&model, &first_pass);
+    for (x, y) in a.iter().zip(&b) {
+        assert!((x - y).abs() < 1e-3, "{x} vs {y}");
+    }
+}
+
+#[test]
+fn the_imitation_term_pays_for_following_the_demo_start_clip_and_only_then() {
+    let (model, demo, _) = setup();
+    let bench = Benchmark::embedded().unwrap();
+    let (_, task) = bench.task("train-0001").unwrap();
+    let mut config = EnvConfig::default();
+    config.weights.imitation = 1.0;
+    let sim = SimConfig::default();
+    let make = || TaskEnv::new(&model, &task, &bench.catalogue, sim.clone(), config.clone());
+    // From a demo start, holding the clip's own joint angles for one step follows the clip
+    // closely: a high imitation term, paid into the task reward.
+    let mut env = make();
+    env.start_from_demo(&demo, 0, 1.0);
+    let hold = zero_error_action(&model, &env);
+    let r = env.step(&hold);
+    assert!(r.terms.imitation > 0.6, "{}", r.terms.imitation);
+    // A task start has nothing to imitate.
+    let mut plain = make();
+    let r = plain.step(&hold);
+    assert_eq!(r.terms.imitation, 0.0);
+    // Off by default: the same demo start with weight 0 records no term.
+    let mut off = TaskEnv::new(
+        &model,
+        &task,
+        &bench.catalogue,
+        sim.clone(),
+        EnvConfig::default(),
+    );
+    off.start_from_demo(&demo, 0, 1.0);
+    assert_eq!(off.step(&hold).terms.imitation, 0.0);
+    // Lying on the floor 1 s later earns far less than following.
+    let mut lying = make();
+    lying.start_from_demo(&demo, 0, 1.0);
+    let mut last = 1.0;
+    for _ in 0..30 {
+        last = lying.step(&vec![-1.0; model.dofs.len()]).terms.imitation;
+    }
+    assert!(last < 0.5, "{last}");
+}
+
+/// The action whose PD targets are the character's current joint angles.
+fn zero_error_action(model: &CharacterModel, env: &TaskEnv) -> Vec<f32> {
+    let angles = joint_angles(model, &env.world.body_states());
+    let c = &env.world.character;
+    angles
+        .iter()
+        .enumerate()
+        .map(|(i, q)| ((q - c.action_offset[i]) / c.action_scale[i]).clamp(-1.0, 1.0))
+        .collect()
+}

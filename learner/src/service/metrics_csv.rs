@@ -39,6 +39,7 @@ pub const COLUMNS: &[&str] = &[
     "reward_release_retreat",
     "reward_success",
     "reward_alive",
+    "reward_imitation",
 ];
 
 pub struct MetricsCsv {

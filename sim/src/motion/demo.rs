@@ -56,6 +56,9 @@ struct DemoClip {
     frame_dt: f32,
     /// The clip carries an object (OMOMO): a start from it needs the object placed too.
     with_object: bool,
+    /// The clip is one cycle of a periodic motion (DeepMimic `"Loop": "wrap"`): its last pose is
+    /// its first moved along the ground, so it continues by repeating itself from there.
+    looped: bool,
 }
 
 impl DemoClip {
@@ -142,6 +145,7 @@ impl DemoMotion {
                 poses,
                 frame_dt,
                 with_object: false,
+                looped: false,
             };
             // A little slack so a clip exactly as long as the window is not lost to rounding.
             if clip.duration_s() < window.span_s() * (1.0 - 1e-5) {
@@ -173,6 +177,7 @@ impl DemoMotion {
         window: AmpWindow,
     ) -> Result<Self, MotionError> {
         let mut clips = Vec::new();
+        let mut looped = Vec::new();
         for (name, path) in installed(dir, Source::DeepMimic)? {
             let file = path.display().to_string();
             let text = std::fs::read_to_string(&path).map_err(|source| MotionError::Io {
@@ -181,6 +186,7 @@ impl DemoMotion {
             })?;
             let clip = DeepMimicClip::parse(&text, &file)?;
             let frame_dt = uniform_frame_dt(&clip, &file)?;
+            looped.push(clip.looped);
             clips.push((name, deepmimic_poses(model, &clip), frame_dt));
         }
         let mut omomo_count = 0;
@@ -203,6 +209,9 @@ impl DemoMotion {
         let mut demo = Self::from_clips(model, clips, window)?;
         for c in &mut demo.clips[deepmimic..] {
             c.with_object = true;
+        }
+        for (c, looped) in demo.clips.iter_mut().zip(looped) {
+            c.looped = looped;
         }
         Ok(demo)
     }
@@ -361,6 +370,91 @@ impl DemoMotion {
                 }
             })
             .collect()
+    }
+}
+
+impl DemoMotion {
+    /// Marks clip `clip` as one cycle of a periodic motion (as a DeepMimic `"Loop": "wrap"` file
+    /// does), so [`Self::reference_track`] repeats it. Panics if `clip` is out of range.
+    pub fn set_looped(&mut self, clip: usize, looped: bool) {
+        self.clips[clip].looped = looped;
+    }
+
+    /// The reference an imitation reward tracks from a start at `t0`: every body's state (as
+    /// [`Self::body_states_at`]) at `t0 + k·dt` for `k = 1..=steps`, the state the character
+    /// should be in after its k-th control step. A looped clip repeats past its end, each
+    /// repetition moved by the clip's own ground displacement (heading and horizontal position
+    /// of its last root frame against its first, as DeepMimic cycles a walk); a clip that is not
+    /// looped ends the track at its end (fewer than `steps` entries).
+    pub fn reference_track(
+        &self,
+        clip: usize,
+        t0: f32,
+        steps: usize,
+        dt: f32,
+    ) -> Vec<Vec<BodyState>> {
+        let c = &self.clips[clip];
+        let period = c.duration_s();
+        let cycle = c.looped.then(|| {
+            let first = forward_kinematics(&self.model, &c.poses[0]);
+            let last = forward_kinematics(&self.model, &c.poses[c.poses.len() - 1]);
+            GroundMove::between(first[0], last[0])
+        });
+        let mut out = Vec::with_capacity(steps);
+        for k in 1..=steps {
+            let t = t0 + k as f32 * dt;
+            let (repeats, local_t) = match &cycle {
+                Some(_) if t > period && period > 0.0 => {
+                    let n = (t / period).floor();
+                    (n as u32, t - n * period)
+                }
+                _ if t > period => break,
+                _ => (0, t),
+            };
+            let mut states = self.body_states_at(clip, local_t);
+            if let Some(step) = &cycle {
+                for _ in 0..repeats {
+                    for s in &mut states {
+                        *s = step.apply(s);
+                    }
+                }
+            }
+            out.push(states);
+        }
+        out
+    }
+}
+
+/// A rigid motion along the ground: a turn about +z followed by a horizontal shift.
+#[derive(Clone, Copy, Debug)]
+struct GroundMove {
+    turn: Rotation,
+    from: Vector,
+    to: Vector,
+}
+
+impl GroundMove {
+    /// The ground move carrying root frame `a` onto root frame `b` (heading and horizontal
+    /// position; height and tilt are left to the clip).
+    fn between(a: (Vector, Rotation), b: (Vector, Rotation)) -> Self {
+        let yaw = |r: Rotation| {
+            let f = r * Vector::X;
+            f.y.atan2(f.x)
+        };
+        Self {
+            turn: Rotation::from_rotation_z(yaw(b.1) - yaw(a.1)),
+            from: Vector::new(a.0.x, a.0.y, 0.0),
+            to: Vector::new(b.0.x, b.0.y, 0.0),
+        }
+    }
+
+    fn apply(&self, s: &BodyState) -> BodyState {
+        BodyState {
+            pos: self.to + self.turn * (s.pos - self.from),
+            rot: (self.turn * s.rot).normalize(),
+            linvel: self.turn * s.linvel,
+            angvel: self.turn * s.angvel,
+        }
     }
 }
 

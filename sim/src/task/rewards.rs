@@ -2,6 +2,7 @@
 //! The task reward of a step is their weighted sum ([`RewardWeights`]); the style reward comes
 //! from the AMP discriminator elsewhere.
 
+use crate::obs::BodyState;
 use rapier3d::math::Vector;
 use serde::{Deserialize, Serialize};
 
@@ -99,6 +100,40 @@ pub fn power_penalty(torques: &[f32], joint_velocities: &[f32]) -> f32 {
         .sum::<f32>()
 }
 
+/// Imitation of a reference motion, DeepMimic's tracking reward (Peng et al. 2018, eq. 5-9), over
+/// body states in the world frame: `sim` is the character now, `reference` where the clip says it
+/// should be (the same bodies, the root first), `end_effectors` the indices of the feet and hands.
+/// In [0, 1]:
+/// 0.65 · exp(-2 Σ angle(body rotation)²) + 0.1 · exp(-0.1 Σ |angular velocity error|²)
+/// + 0.15 · exp(-40 Σ |end-effector error relative to the root|²)
+/// + 0.1 · exp(-10 (|root position error|² + 0.1 |root velocity error|²)).
+/// DeepMimic sums local joint rotations; world rotations are used here (the root's included), so
+/// a wrong heading costs on every body, which keeps the character on the reference's course.
+pub fn imitation(sim: &[BodyState], reference: &[BodyState], end_effectors: &[usize]) -> f32 {
+    let (Some(root), Some(ref_root)) = (sim.first(), reference.first()) else {
+        return 0.0;
+    };
+    let mut pose = 0.0;
+    let mut spin = 0.0;
+    for (s, r) in sim.iter().zip(reference) {
+        let angle = s.rot.angle_between(r.rot);
+        pose += angle * angle;
+        spin += (s.angvel - r.angvel).length_squared();
+    }
+    let mut ends = 0.0;
+    for &e in end_effectors {
+        if let (Some(s), Some(r)) = (sim.get(e), reference.get(e)) {
+            ends += ((s.pos - root.pos) - (r.pos - ref_root.pos)).length_squared();
+        }
+    }
+    let root_err = (root.pos - ref_root.pos).length_squared()
+        + 0.1 * (root.linvel - ref_root.linvel).length_squared();
+    0.65 * (-2.0 * pose).exp()
+        + 0.1 * (-0.1 * spin).exp()
+        + 0.15 * (-40.0 * ends).exp()
+        + 0.1 * (-10.0 * root_err).exp()
+}
+
 /// Parameters of the release-and-retreat reward (paper, Algorithm 1).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -172,6 +207,9 @@ pub struct RewardWeights {
     /// discriminator's reward shrinks on everything the early policy does, so without it the
     /// only reason to stay up was ~0.05 of task reward per step (RESULTS.md, third session).
     pub alive: f32,
+    /// Tracking the clip a demo start came from ([`imitation`]) for `EnvConfig::imitation_seconds`
+    /// after the start; 0 (off) by default.
+    pub imitation: f32,
 }
 
 impl Default for RewardWeights {
@@ -191,6 +229,7 @@ impl Default for RewardWeights {
             success: 20.0,
             // 0.5 (x the learner's task weight 0.5): survival now pays 0.25 per step.
             alive: 0.5,
+            imitation: 0.0,
         }
     }
 }
@@ -201,6 +240,62 @@ mod tests {
 
     fn v(x: f32, y: f32, z: f32) -> Vector {
         Vector::new(x, y, z)
+    }
+
+    fn body(pos: Vector, rot: rapier3d::math::Rotation) -> BodyState {
+        BodyState {
+            pos,
+            rot,
+            linvel: Vector::ZERO,
+            angvel: Vector::ZERO,
+        }
+    }
+
+    /// A root, a hand 0.5 m in front of it and a foot 0.9 m below it.
+    fn three_bodies(root: Vector, yaw: f32) -> Vec<BodyState> {
+        let r = rapier3d::math::Rotation::from_rotation_z(yaw);
+        vec![
+            body(root, r),
+            body(root + r * v(0.5, 0.0, 0.0), r),
+            body(root + v(0.0, 0.0, -0.9), r),
+        ]
+    }
+
+    #[test]
+    fn imitation_is_one_on_the_reference_and_falls_off_with_each_error() {
+        let reference = three_bodies(v(1.0, 2.0, 0.9), 0.3);
+        let ends = [1, 2];
+        assert!((imitation(&reference, &reference, &ends) - 1.0).abs() < 1e-6);
+        // Displaced as a whole by 0.3 m: only the root term pays less.
+        let shifted = three_bodies(v(1.3, 2.0, 0.9), 0.3);
+        let r = imitation(&shifted, &reference, &ends);
+        assert!(
+            (r - (0.9 + 0.1 * (-10.0f32 * 0.09).exp())).abs() < 1e-5,
+            "{r}"
+        );
+        // Turned by 0.5 rad: the pose term (every body) and the hand relative to the root.
+        let turned = three_bodies(v(1.0, 2.0, 0.9), 0.8);
+        let r_turn = imitation(&turned, &reference, &ends);
+        assert!(r_turn < r && r_turn > 0.0, "{r_turn}");
+        let pose = 0.65 * (-2.0f32 * 3.0 * 0.25).exp();
+        let hand_err = 2.0 * 0.5 * (0.25f32).sin(); // chord of 0.5 rad on a 0.5 m arm
+        let ends_term = 0.15 * (-40.0 * hand_err * hand_err).exp();
+        assert!(
+            (r_turn - (pose + 0.1 + ends_term + 0.1)).abs() < 1e-4,
+            "{r_turn}"
+        );
+        // Spinning where the reference does not: only the velocity term.
+        let mut spinning = reference.clone();
+        spinning[0].angvel = v(0.0, 0.0, 3.0);
+        let r_spin = imitation(&spinning, &reference, &ends);
+        assert!(
+            (r_spin - (0.9 + 0.1 * (-0.9f32).exp())).abs() < 1e-5,
+            "{r_spin}"
+        );
+        // A fallen character earns almost nothing.
+        let fallen = three_bodies(v(1.0, 2.0, 0.1), 2.5);
+        assert!(imitation(&fallen, &reference, &ends) < 0.15);
+        assert_eq!(imitation(&[], &reference, &ends), 0.0);
     }
 
     #[test]
