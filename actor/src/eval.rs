@@ -109,17 +109,68 @@ impl EvalSetup<'_> {
     }
 }
 
-/// Runs every `(task, seed)` job with `ac`'s mean actions, `setup.batch` environments at a time;
-/// `progress` is called with the number of episodes finished so far. Results keep the jobs'
-/// order. Each episode may run every pair's cycle time limit (`env.switching.max_cycle_steps`).
-pub fn evaluate(
-    ac: &ActorCritic,
+/// Which policy acts: one policy throughout (a teacher on its own pairs, the student), or the
+/// paper's "T" rows: Teacher 1 on each episode's first cycle and Teacher 2 on every later one,
+/// switched by the environment's cycle tracker (the same finite-state machine the
+/// dagger-server's labels follow), with no reset between them.
+#[derive(Clone, Copy)]
+pub enum EvalPolicy<'a> {
+    One(&'a ActorCritic),
+    Teachers {
+        first: &'a ActorCritic,
+        later: &'a ActorCritic,
+    },
+}
+
+impl<'a> EvalPolicy<'a> {
+    /// The policies, in the order [`Self::index_for_cycle`] indexes them.
+    fn policies(&self) -> Vec<&'a ActorCritic> {
+        match *self {
+            EvalPolicy::One(ac) => vec![ac],
+            EvalPolicy::Teachers { first, later } => vec![first, later],
+        }
+    }
+
+    /// Which of [`Self::policies`] acts during cycle `cycle` (0-based).
+    pub fn index_for_cycle(&self, cycle: usize) -> usize {
+        match self {
+            EvalPolicy::One(_) => 0,
+            EvalPolicy::Teachers { .. } => usize::from(cycle > 0),
+        }
+    }
+}
+
+impl<'a> From<&'a ActorCritic> for EvalPolicy<'a> {
+    fn from(ac: &'a ActorCritic) -> Self {
+        EvalPolicy::One(ac)
+    }
+}
+
+/// Runs every `(task, seed)` job with the policy's mean actions, `setup.batch` environments at a
+/// time; `progress` is called with the number of episodes finished so far. Results keep the
+/// jobs' order. Each episode may run every pair's cycle time limit
+/// (`env.switching.max_cycle_steps`).
+pub fn evaluate<'a>(
+    policy: impl Into<EvalPolicy<'a>>,
     setup: &EvalSetup,
     jobs: &[(Task, u64)],
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<EpisodeEval>, NetError> {
+    let policy = policy.into();
+    let policies = policy.policies();
     let batch = setup.batch;
-    let act_dim = ac.act_dim();
+    let act_dim = policies[0].act_dim();
+    let obs_dim = policies[0].obs_dim();
+    if let Some(other) = policies
+        .iter()
+        .find(|p| p.act_dim() != act_dim || p.obs_dim() != obs_dim)
+    {
+        return Err(NetError::Config(format!(
+            "the teachers' shapes differ: {obs_dim} observations -> {act_dim} actions and {} -> {}",
+            other.obs_dim(),
+            other.act_dim()
+        )));
+    }
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(batch.max(1)) {
         let mut slots: Vec<Slot> = chunk
@@ -138,14 +189,25 @@ pub fn evaluate(
             if active.is_empty() {
                 break;
             }
-            let obs: Vec<f32> = active
-                .par_iter()
-                .map(|&i| slots[i].env.observation())
-                .collect::<Vec<_>>()
-                .concat();
-            let actions = ac.act_deterministic(&obs)?;
-            for (row, &i) in actions.chunks_exact(act_dim).zip(&active) {
-                slots[i].action.copy_from_slice(row);
+            // One batched forward pass per policy, over the environments it acts in now.
+            for (p, ac) in policies.iter().enumerate() {
+                let acting: Vec<usize> = active
+                    .iter()
+                    .copied()
+                    .filter(|&i| policy.index_for_cycle(slots[i].env.cycles.current) == p)
+                    .collect();
+                if acting.is_empty() {
+                    continue;
+                }
+                let obs: Vec<f32> = acting
+                    .par_iter()
+                    .map(|&i| slots[i].env.observation())
+                    .collect::<Vec<_>>()
+                    .concat();
+                let actions = ac.act_deterministic(&obs)?;
+                for (row, &i) in actions.chunks_exact(act_dim).zip(&acting) {
+                    slots[i].action.copy_from_slice(row);
+                }
             }
             slots
                 .par_iter_mut()
@@ -450,6 +512,67 @@ mod tests {
             assert!(e.steps <= 2 * 8 + 1 || e.fell, "{e:?}");
         }
         assert_eq!(run(), first, "deterministic");
+    }
+
+    #[test]
+    fn teachers_switch_at_the_first_handoff_and_batch_like_one_policy() {
+        let bench = lhm_scenes::Benchmark::embedded().unwrap();
+        let model = CharacterModel::amp_humanoid();
+        let mut env = EnvConfig::default();
+        env.switching.max_cycle_steps = 8;
+        let sim = SimConfig::default();
+        let net = |seed| {
+            let mut c = lhm_nets::ActorCriticConfig::with_hidden(&[16]);
+            c.init_seed = seed;
+            ActorCritic::new(TaskEnv::obs_dim(&model, &env), model.dofs.len(), &c).unwrap()
+        };
+        let (a, b) = (net(1), net(2));
+        let two_pairs: Vec<(Task, u64)> = bench.tasks(lhm_scenes::Split::Unseen)[..3]
+            .iter()
+            .map(|t| (t.clone(), 0))
+            .collect();
+        let first_pairs: Vec<(Task, u64)> = two_pairs
+            .iter()
+            .filter_map(|(t, s)| t.single_pair(0).map(|t| (t, *s)))
+            .collect();
+        let setup = EvalSetup {
+            model: &model,
+            catalogue: &bench.catalogue,
+            sim: &sim,
+            env: &env,
+            batch: 2,
+        };
+        let run = |p: EvalPolicy, jobs: &[(Task, u64)]| evaluate(p, &setup, jobs, &|_| {}).unwrap();
+        let teachers = EvalPolicy::Teachers {
+            first: &a,
+            later: &b,
+        };
+        assert_eq!(teachers.index_for_cycle(0), 0);
+        assert_eq!(teachers.index_for_cycle(1), 1);
+        assert_eq!(teachers.index_for_cycle(4), 1);
+        // On first pairs alone Teacher 2 never acts.
+        assert_eq!(
+            run(teachers, &first_pairs),
+            run(EvalPolicy::One(&a), &first_pairs)
+        );
+        // The same net as both teachers scores exactly as that net alone, split batches and all.
+        let same = EvalPolicy::Teachers {
+            first: &a,
+            later: &a,
+        };
+        assert_eq!(run(same, &two_pairs), run(EvalPolicy::One(&a), &two_pairs));
+        // Teachers of different shapes are refused.
+        let small = ActorCritic::new(
+            7,
+            model.dofs.len(),
+            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
+        )
+        .unwrap();
+        let odd = EvalPolicy::Teachers {
+            first: &a,
+            later: &small,
+        };
+        assert!(evaluate(odd, &setup, &two_pairs, &|_| {}).is_err());
     }
 
     #[test]

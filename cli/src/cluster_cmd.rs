@@ -11,6 +11,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use lhm_actor::{run_actor, ActorConfig};
 use lhm_cluster::{shutdown, Endpoints};
+use lhm_learner::service::stage::Stage;
 use lhm_learner::service::{run_learner, DemoSource, Hooks, IterationReport, TrainConfig};
 use lhm_protos::keys;
 
@@ -44,6 +45,11 @@ pub struct LearnerOpts {
     /// from that instead.
     #[arg(long)]
     init_from: Option<PathBuf>,
+    /// Run one stage of the paper's pipeline: `t1` (Teacher 1 pretraining), `t1-rr`
+    /// (release-and-retreat fine-tuning; needs --init-from the t1 policy), `t2` (Teacher 2; needs
+    /// --teacher1, and starts from that policy's weights unless --init-from says otherwise).
+    #[arg(long)]
+    stage: Option<String>,
     /// Where `scripts/install-motions` put the clips (default: $LHM_MOTION_DIR or ~/.cache/lhm/motions).
     #[arg(long)]
     motion_dir: Option<PathBuf>,
@@ -81,7 +87,9 @@ impl LearnerOpts {
         if let Some(dir) = &self.scenes.scenes {
             config.scenes = Some(dir.clone());
         }
-        if let Some(path) = &self.teacher1 {
+        if let Some(stage) = &self.stage {
+            Stage::parse(stage)?.apply(&mut config, self.teacher1.as_deref())?;
+        } else if let Some(path) = &self.teacher1 {
             config.teacher1 = Some(path.clone());
             config.role = "teacher2".into();
             if config.tasks == lhm_cluster::TaskSet::TrainSingleObject {
@@ -94,11 +102,29 @@ impl LearnerOpts {
     }
 
     fn demo(&self, config: &TrainConfig) -> Result<Option<Box<dyn DemoSource>>> {
-        if !config.amp_enabled {
-            return Ok(None);
-        }
-        crate::demo::load(self.motion_dir.clone(), config).map(Some)
+        demo_for(self.motion_dir.clone(), config)
     }
+}
+
+/// The discriminator's demo features for `config` (none without AMP).
+pub(crate) fn demo_for(
+    motion_dir: Option<PathBuf>,
+    config: &TrainConfig,
+) -> Result<Option<Box<dyn DemoSource>>> {
+    if !config.amp_enabled {
+        return Ok(None);
+    }
+    crate::demo::load(motion_dir, config).map(Some)
+}
+
+/// How `lhm train` (and each stage of `lhm pipeline`) runs on this machine: the learner in this
+/// process and `actors` actor processes on loopback.
+#[derive(Clone, Debug)]
+pub(crate) struct LocalCluster {
+    pub actors: Option<usize>,
+    pub envs: usize,
+    pub port: u16,
+    pub zenoh_config: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -269,8 +295,23 @@ fn run_with_progress(
 
 pub fn train(args: TrainArgs) -> Result<()> {
     shutdown::install();
-    let mut config = args.learner.train_config()?;
+    let config = args.learner.train_config()?;
     let demo = args.learner.demo(&config)?;
+    let local = LocalCluster {
+        actors: args.actors,
+        envs: args.envs,
+        port: args.port,
+        zenoh_config: args.learner.zenoh_config.clone(),
+    };
+    train_locally(config, demo, &local)
+}
+
+/// Runs `config` to its end (or SIGINT/SIGTERM) with the learner here and local actor processes.
+pub(crate) fn train_locally(
+    mut config: TrainConfig,
+    demo: Option<Box<dyn DemoSource>>,
+    args: &LocalCluster,
+) -> Result<()> {
     let port = match args.port {
         0 => std::net::TcpListener::bind("127.0.0.1:0")
             .and_then(|l| l.local_addr())
@@ -282,7 +323,7 @@ pub fn train(args: TrainArgs) -> Result<()> {
     let endpoints = Endpoints {
         listen: vec![endpoint.clone()],
         connect: vec![],
-        zenoh_config: args.learner.zenoh_config.clone(),
+        zenoh_config: args.zenoh_config.clone(),
     };
     let actors = args
         .actors

@@ -4,7 +4,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use lhm_actor::eval::{episodes_csv, evaluate, summarize, EvalSetup, START_YAW_JITTER};
+use lhm_actor::eval::{episodes_csv, evaluate, summarize, EvalPolicy, EvalSetup, START_YAW_JITTER};
 use lhm_scenes::{Benchmark, Split, Task};
 use lhm_sim::render::{write_gif, Camera};
 use lhm_sim::CharacterModel;
@@ -14,41 +14,45 @@ use std::path::PathBuf;
 pub struct EvalArgs {
     /// A learner checkpoint (`runs/<run>/checkpoint` or `runs/<run>/policy`).
     #[arg(long)]
-    policy: PathBuf,
+    pub(crate) policy: PathBuf,
     /// `train` (350 two-object tasks), `unseen` (66), `extension` (3-5 objects), or `ext3`,
     /// `ext4`, `ext5` (the extension tasks with that many objects).
     #[arg(long, default_value = "unseen")]
-    split: String,
+    pub(crate) split: String,
     /// Seeds per task: seed 0 is the task as specified, later seeds turn the character's start
     /// heading by up to ±0.2 rad.
     #[arg(long, default_value_t = 3)]
-    seeds: u64,
+    pub(crate) seeds: u64,
     /// Only each task's first (object, goal) pair (Teacher 1's setting).
     #[arg(long)]
-    first_pair: bool,
+    pub(crate) first_pair: bool,
+    /// The paper's "T" rows: this Teacher 1 checkpoint acts on each episode's first cycle and
+    /// --policy (Teacher 2) on every later one, switched at the cycle handoff with no reset.
+    #[arg(long, conflicts_with = "first_pair")]
+    pub(crate) teacher1: Option<PathBuf>,
     /// Only the first N tasks of the split (a quick look).
     #[arg(long)]
-    limit: Option<usize>,
+    pub(crate) limit: Option<usize>,
     /// The run's training config (default: the `config.toml` beside the checkpoint, else the
     /// built-in default).
     #[arg(long)]
-    config: Option<PathBuf>,
+    pub(crate) config: Option<PathBuf>,
     /// Print the table's keys as JSON (`success_k`, `dist_k`, `success_all`, `fall_rate`, each
     /// with `_std`) instead of the Markdown table.
     #[arg(long)]
-    json: bool,
+    pub(crate) json: bool,
     /// Write `episodes.csv` (one line per task and seed), `table.md` and `table.json` here.
     #[arg(short, long)]
-    output: Option<PathBuf>,
+    pub(crate) output: Option<PathBuf>,
     /// Environments stepped in lockstep (one batched forward pass per step).
     #[arg(long, default_value_t = 64)]
-    batch: usize,
+    pub(crate) batch: usize,
     /// Also write a GIF of each of the first N episodes (mean actions, third person, until the
     /// episode ends; 10 fps) into the --output directory, named `<task>-s<seed>.gif`.
     #[arg(long, default_value_t = 0)]
-    gifs: usize,
+    pub(crate) gifs: usize,
     #[command(flatten)]
-    scenes: crate::scenes_cmd::Source,
+    pub(crate) scenes: crate::scenes_cmd::Source,
 }
 
 fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
@@ -82,6 +86,20 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let model = CharacterModel::amp_humanoid();
     let train = crate::render_cmd::train_config_for(Some(&a.policy), a.config.as_deref())?;
     let learner = crate::render_cmd::load_policy(&a.policy, &train, &model)?;
+    let teacher1 = match &a.teacher1 {
+        Some(path) => {
+            let t1_config = crate::render_cmd::train_config_for(Some(path), None)?;
+            Some(crate::render_cmd::load_policy(path, &t1_config, &model)?)
+        }
+        None => None,
+    };
+    let policy = match &teacher1 {
+        Some(t1) => EvalPolicy::Teachers {
+            first: &t1.actor_critic,
+            later: &learner.actor_critic,
+        },
+        None => EvalPolicy::One(&learner.actor_critic),
+    };
     let mut tasks = split_tasks(&bench, &a.split)?;
     if a.first_pair {
         tasks = tasks.iter().filter_map(|t| t.single_pair(0)).collect();
@@ -114,7 +132,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         env: &train.env,
         batch: a.batch,
     };
-    let episodes = evaluate(&learner.actor_critic, &setup, &jobs, &|done| {
+    let episodes = evaluate(policy, &setup, &jobs, &|done| {
         bar.set_position(done as u64);
         if plain {
             eprintln!("eval: {done}/{total} episodes");
@@ -124,11 +142,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let wall = started.elapsed().as_secs_f64();
     let table = summarize(&episodes);
     let steps: u64 = episodes.iter().map(|e| u64::from(e.steps)).sum();
-    let method = format!(
-        "{}{}",
-        a.policy.display(),
-        if a.first_pair { " (first pair)" } else { "" }
-    );
+    let method = match &a.teacher1 {
+        Some(t1) => format!("{} then {} (T)", t1.display(), a.policy.display()),
+        None => format!(
+            "{}{}",
+            a.policy.display(),
+            if a.first_pair { " (first pair)" } else { "" }
+        ),
+    };
     let markdown = table.markdown(&method);
     let mut json = serde_json::json!({
         "split": a.split,
@@ -169,7 +190,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let filmed = crate::render_cmd::film(
                 &mut env,
                 &shot,
-                &mut |env| Ok(learner.actor_critic.act_deterministic(&env.observation())?),
+                &mut |env| {
+                    // The same switch as the evaluation: Teacher 1 on the first cycle.
+                    let ac = match &teacher1 {
+                        Some(t1) if env.cycles.current == 0 => &t1.actor_critic,
+                        _ => &learner.actor_critic,
+                    };
+                    Ok(ac.act_deterministic(&env.observation())?)
+                },
                 &mut || {},
             )?;
             let file = std::fs::File::create(&path)

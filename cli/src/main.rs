@@ -7,6 +7,7 @@ mod cluster_cmd;
 mod demo;
 mod eval_cmd;
 mod motion_cmd;
+mod pipeline_cmd;
 mod plot_cmd;
 mod record_cmd;
 mod render_cmd;
@@ -31,6 +32,9 @@ struct Cli {
 enum Command {
     /// Train Teacher 1 on this machine: the learner on loopback and one actor process per core.
     Train(cluster_cmd::TrainArgs),
+    /// The paper's stages in order on this machine — t1, t1-rr (release-and-retreat), t2 — then
+    /// eval; re-running continues where it stopped.
+    Pipeline(pipeline_cmd::PipelineArgs),
     /// The learner service alone (actors connect to it with `lhm actor --connect`).
     Learner(cluster_cmd::LearnerArgs),
     /// One actor process: simulates episodes and streams trajectories to a learner.
@@ -100,6 +104,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Train(args) => cluster_cmd::train(args).map(|()| ExitCode::SUCCESS),
+        Command::Pipeline(args) => pipeline_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Learner(args) => cluster_cmd::learner(args).map(|()| ExitCode::SUCCESS),
         Command::Actor(args) => cluster_cmd::actor(args).map(|()| ExitCode::SUCCESS),
         Command::Record(args) => record_cmd::run(args).map(|()| ExitCode::SUCCESS),

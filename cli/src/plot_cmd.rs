@@ -75,6 +75,16 @@ pub fn run(args: PlotArgs) -> Result<()> {
     Ok(())
 }
 
+/// `lhm plot RUN_DIR` with its defaults: RUN_DIR/curves.png from RUN_DIR/metrics.csv.
+pub(crate) fn plot_run(run_dir: &std::path::Path) -> Result<()> {
+    run(PlotArgs {
+        run_dir: run_dir.to_path_buf(),
+        output: None,
+        width: 1200,
+        height: 1400,
+    })
+}
+
 /// metrics.csv parsed: every column by name, one value per row, NaN where a field was empty or
 /// `nan`.
 #[derive(Debug)]

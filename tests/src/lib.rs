@@ -360,3 +360,21 @@ pub fn wait_for(
         std::thread::sleep(Duration::from_millis(200));
     }
 }
+
+/// `lhm pipeline --config CONFIG --runs-dir DIR/runs` with 2 actor processes, logging to
+/// `DIR/<log_name>`.
+pub fn start_pipeline(dir: &Path, config: &Path, log_name: &str) -> Proc {
+    let args: Vec<String> = [
+        "pipeline",
+        "--config",
+        &config.display().to_string(),
+        "--runs-dir",
+        &dir.join("runs").display().to_string(),
+        "--actors",
+        "2",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    spawn("pipeline", &args, &dir.join(log_name))
+}

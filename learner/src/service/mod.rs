@@ -5,6 +5,7 @@
 pub mod batch;
 pub mod intake;
 pub mod metrics_csv;
+pub mod stage;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};

@@ -1,0 +1,359 @@
+//! `lhm pipeline`: the paper's stages in order — `t1` → `t1-rr` → `t2` → eval — each a run of the
+//! same local actor–learner cluster as `lhm train` (`Stage` presets its configuration), in
+//! `<runs dir>/<pipeline>/<stage>/`. A stage whose status says it reached its budget is skipped
+//! and an unfinished one resumes from its checkpoint, so running the command again continues
+//! the pipeline wherever it stopped (Ctrl-C, SIGKILL, power loss).
+
+use crate::cluster_cmd::{demo_for, train_locally, LocalCluster};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use lhm_cluster::shutdown;
+use lhm_learner::service::stage::Stage;
+use lhm_learner::service::TrainConfig;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+#[derive(Args)]
+pub struct PipelineArgs {
+    /// The pipeline (TOML; see configs/pipeline-smoke.toml). Default: the laptop pipeline built
+    /// in (`PipelineConfig::default`).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Directory of runs: the pipeline lives in RUNS_DIR/<name>/ (default `runs`).
+    #[arg(long, default_value = "runs")]
+    runs_dir: PathBuf,
+    /// Actor processes per stage (default: the config's, else one per CPU core).
+    #[arg(long)]
+    actors: Option<usize>,
+    /// Where `scripts/install-motions` put the clips (default: $LHM_MOTION_DIR or ~/.cache/lhm/motions).
+    #[arg(long)]
+    motion_dir: Option<PathBuf>,
+    #[command(flatten)]
+    scenes: crate::scenes_cmd::Source,
+}
+
+/// One training stage of the pipeline.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageConfig {
+    /// `t1`, `t1-rr` or `t2`.
+    pub stage: String,
+    /// The stage's training configuration (a `lhm train --config` file, relative to the
+    /// pipeline file); absent: the built-in default.
+    #[serde(default)]
+    pub config: Option<PathBuf>,
+    /// The stage's budget: PPO iterations in all.
+    pub iterations: u64,
+}
+
+/// The evaluation at the end: the last Teacher 1 policy on each split's first pairs.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EvalConfig {
+    pub splits: Vec<String>,
+    pub seeds: u64,
+    /// Only the first N tasks of each split (absent: all).
+    pub limit: Option<usize>,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        Self {
+            splits: vec!["train".into(), "unseen".into()],
+            seeds: 1,
+            limit: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PipelineConfig {
+    /// The pipeline's directory name under the runs directory.
+    pub name: String,
+    pub actors: Option<usize>,
+    /// Environments per actor process.
+    pub envs: usize,
+    /// The stages, in order.
+    #[serde(rename = "stage")]
+    pub stages: Vec<StageConfig>,
+    pub eval: EvalConfig,
+}
+
+impl Default for PipelineConfig {
+    /// The laptop pipeline: ~1 h of Teacher 1, 15 min each of fine-tuning and Teacher 2 at the
+    /// 2-core loop's ~1,400 samples/s (4,096-sample iterations).
+    fn default() -> Self {
+        let stage = |stage: &str, iterations| StageConfig {
+            stage: stage.into(),
+            config: None,
+            iterations,
+        };
+        Self {
+            name: "pipeline".into(),
+            actors: None,
+            envs: 16,
+            stages: vec![stage("t1", 1200), stage("t1-rr", 300), stage("t2", 300)],
+            eval: EvalConfig::default(),
+        }
+    }
+}
+
+impl PipelineConfig {
+    pub fn from_toml_file(path: &Path) -> Result<Self> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut config: Self =
+            toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        for s in &mut config.stages {
+            if let Some(c) = &mut s.config {
+                if c.is_relative() {
+                    *c = base.join(&*c);
+                }
+            }
+        }
+        config
+            .check()
+            .with_context(|| format!("in {}", path.display()))?;
+        Ok(config)
+    }
+
+    /// The stages in an order that can run: each known, each budget positive, `t1-rr` after a
+    /// `t1`, `t2` after a Teacher 1 stage, each stage at most once.
+    pub fn check(&self) -> Result<Vec<Stage>> {
+        lhm_protos::keys::check_chunk("pipeline name", &self.name)?;
+        if self.envs == 0 {
+            bail!("envs must be at least 1");
+        }
+        if self.actors == Some(0) {
+            bail!("actors must be at least 1");
+        }
+        if self.stages.is_empty() {
+            bail!("no [[stage]]: list t1, t1-rr, t2 in order");
+        }
+        let mut seen: Vec<Stage> = Vec::new();
+        for (i, s) in self.stages.iter().enumerate() {
+            let stage = Stage::parse(&s.stage).with_context(|| format!("stage {}", i + 1))?;
+            if s.iterations == 0 {
+                bail!(
+                    "stage {} ({}): iterations must be at least 1",
+                    i + 1,
+                    s.stage
+                );
+            }
+            if seen.contains(&stage) {
+                bail!("stage {} ({}) is listed twice", i + 1, s.stage);
+            }
+            let needs = match stage {
+                Stage::T1 => None,
+                Stage::T1Rr => (!seen.contains(&Stage::T1)).then_some("a t1 stage before it"),
+                Stage::T2 => (!seen.iter().any(|s| *s != Stage::T2))
+                    .then_some("a Teacher 1 stage (t1 or t1-rr) before it"),
+            };
+            if let Some(what) = needs {
+                bail!("stage {} ({}) needs {what}", i + 1, s.stage);
+            }
+            seen.push(stage);
+        }
+        if self.eval.seeds == 0 {
+            bail!("eval.seeds must be at least 1");
+        }
+        Ok(seen)
+    }
+}
+
+/// The iteration a run's `status.json` reports (0 when the run has not written one yet).
+fn iterations_done(run_dir: &Path) -> Result<u64> {
+    let path = run_dir.join("status.json");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+    };
+    let json: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    Ok(json.get("iteration").and_then(|v| v.as_u64()).unwrap_or(0))
+}
+
+pub fn run(args: PipelineArgs) -> Result<()> {
+    shutdown::install();
+    let config = match &args.config {
+        Some(path) => PipelineConfig::from_toml_file(path)?,
+        None => PipelineConfig::default(),
+    };
+    let stages = config.check()?;
+    let root = args.runs_dir.join(&config.name);
+    std::fs::create_dir_all(&root).with_context(|| format!("creating {}", root.display()))?;
+    let local = LocalCluster {
+        actors: args.actors.or(config.actors),
+        envs: config.envs,
+        port: 0,
+        zenoh_config: None,
+    };
+    let started = std::time::Instant::now();
+    // The Teacher 1 policy later stages start from: t1's, then t1-rr's once that has run.
+    let mut teacher1: Option<PathBuf> = None;
+    let mut teacher2: Option<PathBuf> = None;
+    for (spec, stage) in config.stages.iter().zip(&stages) {
+        let mut train = match &spec.config {
+            Some(path) => TrainConfig::from_toml_file(path)?,
+            None => TrainConfig::default(),
+        };
+        train.run_id = stage.name().into();
+        train.runs_dir = root.clone();
+        train.max_iterations = Some(spec.iterations);
+        if args.scenes.scenes.is_some() {
+            train.scenes.clone_from(&args.scenes.scenes);
+        }
+        stage.apply(&mut train, teacher1.as_deref())?;
+        train.check()?;
+        let dir = train.run_dir();
+        let done = iterations_done(&dir)?;
+        if done >= spec.iterations {
+            println!(
+                "stage {}: finished ({done} of {} iterations) in {}",
+                stage.name(),
+                spec.iterations,
+                dir.display()
+            );
+        } else {
+            println!(
+                "stage {}: {} to iteration {} in {}",
+                stage.name(),
+                if done > 0 { "resuming" } else { "training" },
+                spec.iterations,
+                dir.display()
+            );
+            let demo = demo_for(args.motion_dir.clone(), &train)?;
+            train_locally(train, demo, &local)
+                .with_context(|| format!("stage {}", stage.name()))?;
+            if shutdown::requested() {
+                println!(
+                    "pipeline {} stopped in stage {}; run the same command again to continue",
+                    config.name,
+                    stage.name()
+                );
+                return Ok(());
+            }
+            let reached = iterations_done(&dir)?;
+            if reached < spec.iterations {
+                bail!(
+                    "stage {} stopped at iteration {reached} of {} without being asked to",
+                    stage.name(),
+                    spec.iterations
+                );
+            }
+        }
+        crate::plot_cmd::plot_run(&dir)
+            .with_context(|| format!("stage {}: curves", stage.name()))?;
+        if *stage == Stage::T2 {
+            teacher2 = Some(dir.join("policy"));
+        } else {
+            teacher1 = Some(dir.join("policy"));
+        }
+    }
+    if let Some(t1) = &teacher1 {
+        evaluate(&config, &root, t1, teacher2.as_deref(), &args.scenes)?;
+    }
+    println!(
+        "pipeline {}: every stage finished ({:.0} s this session); runs in {}",
+        config.name,
+        started.elapsed().as_secs_f64(),
+        root.display()
+    );
+    Ok(())
+}
+
+/// `lhm eval` on each split: the last Teacher 1 policy on the tasks' first pairs into
+/// `<pipeline>/eval/<split>/t1-first-pair/`, and with a Teacher 2, the paper's "T" row (Teacher
+/// 1 on the first cycle, Teacher 2 on the later ones) on whole tasks into `.../teachers/`. An
+/// evaluation whose table is already there is skipped.
+fn evaluate(
+    config: &PipelineConfig,
+    root: &Path,
+    teacher1: &Path,
+    teacher2: Option<&Path>,
+    scenes: &crate::scenes_cmd::Source,
+) -> Result<()> {
+    for split in &config.eval.splits {
+        let mut rows = vec![("t1-first-pair", teacher1, None)];
+        if let Some(t2) = teacher2 {
+            rows.push(("teachers", t2, Some(teacher1.to_path_buf())));
+        }
+        for (row, policy, first) in rows {
+            let out = root.join("eval").join(split).join(row);
+            if out.join("table.json").is_file() {
+                println!("eval {split} {row}: finished, table in {}", out.display());
+                continue;
+            }
+            if shutdown::requested() {
+                return Ok(());
+            }
+            println!("eval {split} {row}: {}", policy.display());
+            crate::eval_cmd::run(crate::eval_cmd::EvalArgs {
+                policy: policy.to_path_buf(),
+                split: split.clone(),
+                seeds: config.eval.seeds,
+                first_pair: first.is_none(),
+                teacher1: first,
+                limit: config.eval.limit,
+                config: None,
+                json: false,
+                output: Some(out),
+                batch: 64,
+                gifs: 0,
+                scenes: scenes.clone(),
+            })
+            .with_context(|| format!("eval {split} {row}"))?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Vec<Stage>> {
+        let c: PipelineConfig = toml::from_str(text)?;
+        c.check()
+    }
+
+    #[test]
+    fn the_default_pipeline_and_a_smoke_file_are_valid() {
+        assert_eq!(
+            PipelineConfig::default().check().unwrap(),
+            vec![Stage::T1, Stage::T1Rr, Stage::T2]
+        );
+        let smoke = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/pipeline-smoke.toml");
+        let c = PipelineConfig::from_toml_file(&smoke).unwrap();
+        assert_eq!(c.stages.len(), 3);
+        assert!(c
+            .stages
+            .iter()
+            .all(|s| s.config.as_ref().is_some_and(|p| p.is_file())));
+    }
+
+    #[test]
+    fn stages_out_of_order_or_unknown_are_refused_by_name() {
+        let err = |t: &str| format!("{:#}", parse(t).unwrap_err());
+        let e = err("[[stage]]\nstage = \"t1-rr\"\niterations = 1\n");
+        assert!(e.contains("needs a t1 stage"), "{e}");
+        let e = err("[[stage]]\nstage = \"t2\"\niterations = 1\n");
+        assert!(e.contains("Teacher 1 stage"), "{e}");
+        let e = err("[[stage]]\nstage = \"t1\"\niterations = 0\n");
+        assert!(e.contains("at least 1"), "{e}");
+        let e = err("[[stage]]\nstage = \"t1\"\niterations = 1\n[[stage]]\nstage = \"t1\"\niterations = 1\n");
+        assert!(e.contains("twice"), "{e}");
+        let e = err("[[stage]]\nstage = \"student\"\niterations = 1\n");
+        assert!(e.contains("not built yet"), "{e}");
+        assert!(toml::from_str::<PipelineConfig>("stages = 3").is_err());
+        // t1 then t2 (no fine-tuning) is a valid pipeline.
+        assert_eq!(
+            parse("[[stage]]\nstage = \"t1\"\niterations = 1\n[[stage]]\nstage = \"t2\"\niterations = 1\n")
+                .unwrap(),
+            vec![Stage::T1, Stage::T2]
+        );
+    }
+}

@@ -1,0 +1,177 @@
+//! The paper's training stages as presets of one [`TrainConfig`]: the same actor–learner run,
+//! differing only in what the actors roll out (role, tasks, the frozen Teacher 1) and what the
+//! learner optimises (the reward weights, where the weights start).
+
+use super::{ServiceError, TrainConfig};
+use std::path::{Path, PathBuf};
+
+/// Release-and-retreat weight a `t1-rr` stage uses when its configuration leaves the term off.
+/// The paper gives no weight; 0.5 (× the task weight) lets a full retreat during the hold pay
+/// as much as the place term at the goal.
+pub const DEFAULT_RELEASE_RETREAT_WEIGHT: f32 = 0.5;
+
+/// One stage of the pipeline (paper Sec. 3, Algorithm 1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Stage {
+    /// Teacher 1 pretraining on the single-object tasks (PPO + AMP).
+    #[serde(rename = "t1")]
+    T1,
+    /// Teacher 1 fine-tuned from `t1` with the release-and-retreat reward.
+    #[serde(rename = "t1-rr")]
+    T1Rr,
+    /// Teacher 2 on the second pair of two-object tasks, from Teacher 1's terminal states.
+    #[serde(rename = "t2")]
+    T2,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 3] = [Stage::T1, Stage::T1Rr, Stage::T2];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::T1 => "t1",
+            Stage::T1Rr => "t1-rr",
+            Stage::T2 => "t2",
+        }
+    }
+
+    /// `t1`, `t1-rr` or `t2`; the student stage is named with a clear error (not built yet).
+    pub fn parse(text: &str) -> Result<Self, ServiceError> {
+        match text {
+            "t1" => Ok(Stage::T1),
+            "t1-rr" => Ok(Stage::T1Rr),
+            "t2" => Ok(Stage::T2),
+            "student" => Err(ServiceError::Config(
+                "stage \"student\" (DAgger distillation) is not built yet; stages are t1, t1-rr, t2"
+                    .into(),
+            )),
+            other => Err(ServiceError::Config(format!(
+                "stage {other:?} is not one of t1, t1-rr, t2"
+            ))),
+        }
+    }
+
+    /// Applies the stage to `config`. `teacher1` is the Teacher 1 policy a later stage starts
+    /// from (`t1-rr`: its weights; `t2`: the frozen policy that plays each episode's first pair,
+    /// and T2's starting weights): a checkpoint stem such as `runs/p/t1/policy`.
+    ///
+    /// - `t1`: role teacher1, as configured.
+    /// - `t1-rr`: role teacher1, initialised from `teacher1`, release-and-retreat weight
+    ///   [`DEFAULT_RELEASE_RETREAT_WEIGHT`] unless the configuration sets one.
+    /// - `t2`: role teacher2 with `teacher1` frozen for the first pair, initialised from it,
+    ///   on the two-object training tasks unless the configuration lists others.
+    pub fn apply(
+        self,
+        config: &mut TrainConfig,
+        teacher1: Option<&Path>,
+    ) -> Result<(), ServiceError> {
+        let need = |what: &str| {
+            teacher1.map(Path::to_path_buf).ok_or_else(|| {
+                ServiceError::Config(format!(
+                    "stage {} needs {what} (a Teacher 1 checkpoint, e.g. runs/p/t1/policy)",
+                    self.name()
+                ))
+            })
+        };
+        match self {
+            Stage::T1 => {
+                config.role = "teacher1".into();
+            }
+            Stage::T1Rr => {
+                let from: PathBuf = match (&config.init_from, teacher1) {
+                    (_, Some(t)) => t.to_path_buf(),
+                    (Some(i), None) => i.clone(),
+                    (None, None) => need("--init-from")?,
+                };
+                config.role = "teacher1".into();
+                config.init_from = Some(from);
+                if config.env.weights.release_retreat == 0.0 {
+                    config.env.weights.release_retreat = DEFAULT_RELEASE_RETREAT_WEIGHT;
+                }
+            }
+            Stage::T2 => {
+                let t1 = match (&config.teacher1, teacher1) {
+                    (_, Some(t)) => t.to_path_buf(),
+                    (Some(t), None) => t.clone(),
+                    (None, None) => need("--teacher1")?,
+                };
+                config.role = "teacher2".into();
+                if config.init_from.is_none() {
+                    config.init_from = Some(t1.clone());
+                }
+                config.teacher1 = Some(t1);
+                if config.tasks == lhm_cluster::TaskSet::TrainSingleObject {
+                    config.tasks = lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_stage_sets_its_role_start_and_reward() {
+        let mut t1 = TrainConfig::default();
+        Stage::T1.apply(&mut t1, None).unwrap();
+        assert_eq!(t1.role, "teacher1");
+        assert_eq!(t1.env.weights.release_retreat, 0.0);
+
+        let mut rr = TrainConfig::default();
+        assert!(
+            Stage::T1Rr.apply(&mut rr, None).is_err(),
+            "t1-rr needs a Teacher 1"
+        );
+        Stage::T1Rr
+            .apply(&mut rr, Some(Path::new("runs/p/t1/policy")))
+            .unwrap();
+        assert_eq!(rr.init_from.as_deref(), Some(Path::new("runs/p/t1/policy")));
+        assert_eq!(
+            rr.env.weights.release_retreat,
+            DEFAULT_RELEASE_RETREAT_WEIGHT
+        );
+        // A weight the configuration sets is kept.
+        let mut rr2 = TrainConfig::default();
+        rr2.env.weights.release_retreat = 2.0;
+        Stage::T1Rr
+            .apply(&mut rr2, Some(Path::new("a/policy")))
+            .unwrap();
+        assert_eq!(rr2.env.weights.release_retreat, 2.0);
+
+        let mut t2 = TrainConfig::default();
+        assert!(
+            Stage::T2.apply(&mut t2, None).is_err(),
+            "t2 needs a Teacher 1"
+        );
+        Stage::T2
+            .apply(&mut t2, Some(Path::new("runs/p/t1-rr/policy")))
+            .unwrap();
+        assert_eq!(t2.role, "teacher2");
+        assert_eq!(
+            t2.teacher1.as_deref(),
+            Some(Path::new("runs/p/t1-rr/policy"))
+        );
+        assert_eq!(
+            t2.init_from.as_deref(),
+            Some(Path::new("runs/p/t1-rr/policy"))
+        );
+        assert_eq!(
+            t2.tasks,
+            lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train)
+        );
+    }
+
+    #[test]
+    fn stage_names_round_trip_and_the_student_is_refused_by_name() {
+        for s in Stage::ALL {
+            assert_eq!(Stage::parse(s.name()).unwrap(), s);
+        }
+        let e = Stage::parse("student").unwrap_err().to_string();
+        assert!(e.contains("not built yet"), "{e}");
+        let e = Stage::parse("t3").unwrap_err().to_string();
+        assert!(e.contains("\"t3\""), "{e}");
+    }
+}
