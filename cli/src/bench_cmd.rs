@@ -99,6 +99,21 @@ enum BenchCommand {
         #[arg(long, default_value_t = 7)]
         repetitions: usize,
     },
+    /// The dagger-server's label throughput: states/s answered for one request of N states (half
+    /// in each cycle, so both teachers work), batched per teacher as the server does against one
+    /// forward pass per state, with the default training network (512-256) at the environment's
+    /// observation size. Threads: RAYON_NUM_THREADS, else all cores.
+    Labels {
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+        /// States per request (each size is measured).
+        #[arg(long, default_values_t = [64usize, 1024])]
+        states: Vec<usize>,
+        /// Timed repetitions; the report gives their median.
+        #[arg(long, default_value_t = 7)]
+        repetitions: usize,
+    },
     /// Distributed layer: actor env steps/s with and without publishing, one vs two actor
     /// processes, and weight-broadcast latency (p50/p99) of the default network.
     Cluster {
@@ -119,6 +134,11 @@ enum BenchCommand {
 
 pub fn run(args: BenchArgs) -> Result<()> {
     match args.command {
+        BenchCommand::Labels {
+            json,
+            states,
+            repetitions,
+        } => bench_labels(json, &states, repetitions),
         BenchCommand::Env {
             json,
             task,
@@ -368,4 +388,67 @@ fn print_fidelity(r: &FidelityReport) {
         r.collapse.max_limit_excess_deg,
         worst.join(", ")
     );
+}
+
+/// `lhm bench labels`: both teachers as the default training run's networks, published and
+/// decoded as the dagger-server receives them.
+fn bench_labels(json: bool, states: &[usize], repetitions: usize) -> Result<()> {
+    let config = lhm_learner::service::TrainConfig::default();
+    let model = CharacterModel::amp_humanoid();
+    let obs_dim = lhm_sim::env::TaskEnv::obs_dim(&model, &config.env);
+    let act_dim = model.dofs.len();
+    let mut teachers = lhm_dagger_server::Teachers::default();
+    for (role, seed) in [
+        (lhm_protos::Role::Teacher1, 1),
+        (lhm_protos::Role::Teacher2, 2),
+    ] {
+        let mut net = config.network.clone();
+        net.init_seed = seed;
+        let ac = lhm_nets::ActorCritic::new(obs_dim, act_dim, &net)?;
+        let spec = lhm_cluster::RunSpec {
+            obs_dim,
+            act_dim,
+            amp_dim: 0,
+            actor_critic: net,
+            env: config.env.clone(),
+            sim: config.sim.clone(),
+            tasks: config.tasks.clone(),
+            chunk_steps: config.chunk_steps,
+            record_every_episodes: 0,
+            chunk_sets_per_version: 0,
+        };
+        let message = lhm_cluster::encode_policy("bench", role, 1, &spec, &ac)?;
+        teachers.update(&lhm_protos::WireMessage::encode_checked(&message)?)?;
+    }
+    let mut rows = Vec::new();
+    for &n in states {
+        let (batched, single) = lhm_dagger_server::bench_labels(&teachers, n.max(1), repetitions)
+            .map_err(|e| anyhow::anyhow!("labelling: {e}"))?;
+        rows.push(serde_json::json!({
+            "states": n,
+            "batched_states_per_s": batched,
+            "per_state_states_per_s": single,
+            "speedup": batched / single,
+        }));
+        if !json {
+            println!(
+                "{n} states per request: {batched:.0} states/s batched, {single:.0} one forward \
+                 pass per state ({:.1}x)",
+                batched / single
+            );
+        }
+    }
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({
+                "obs_dim": obs_dim,
+                "act_dim": act_dim,
+                "hidden": [512, 256],
+                "repetitions": repetitions,
+                "requests": rows,
+            }))?
+        );
+    }
+    Ok(())
 }

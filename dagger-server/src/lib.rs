@@ -2,7 +2,8 @@
 //! the finite-state machine of the paper picks the supervising teacher per state (first cycle →
 //! Teacher 1, later cycles → Teacher 2) and the reply carries that teacher's mean action.
 //! Teachers are the learners' latest published weights (`policy/teacher1`, `policy/teacher2`),
-//! kept current by subscription. DAgger aggregation itself comes with the student pipeline.
+//! kept current by subscription; each teacher labels its rows of a request in one batched
+//! forward pass. DAgger aggregation itself comes with the student pipeline.
 
 use std::sync::{Arc, Mutex};
 
@@ -52,13 +53,18 @@ pub fn answer(bytes: &[u8], teachers: &Teachers) -> LabelReply {
     };
     let n = req.num_states as usize;
     let obs_dim = req.obs_dim as usize;
-    let mut actions = Vec::new();
-    let mut roles = Vec::with_capacity(n);
-    let mut versions = Vec::with_capacity(n);
+    let roles: Vec<Role> = (0..n)
+        .map(|i| teacher_for(Stage::try_from(req.stages[i]).unwrap_or(Stage::Unspecified)))
+        .collect();
+    // One batched forward pass per teacher over the rows it labels, then the rows back in order.
+    let mut actions: Vec<f32> = Vec::new();
+    let mut versions = vec![0u64; n];
     let mut act_dim = 0usize;
-    for i in 0..n {
-        let stage = Stage::try_from(req.stages[i]).unwrap_or(Stage::Unspecified);
-        let role = teacher_for(stage);
+    for role in [Role::Teacher1, Role::Teacher2] {
+        let rows: Vec<usize> = (0..n).filter(|&i| roles[i] == role).collect();
+        if rows.is_empty() {
+            continue;
+        }
         let teacher = match role {
             Role::Teacher2 => &teachers.teacher2,
             _ => &teachers.teacher1,
@@ -82,26 +88,97 @@ pub fn answer(bytes: &[u8], teachers: &Teachers) -> LabelReply {
                 ),
             );
         }
-        let row = &req.observations[i * obs_dim..(i + 1) * obs_dim];
-        match teacher.actor_critic.act_deterministic(row) {
-            Ok(a) => {
-                act_dim = a.len();
-                actions.extend(a);
-            }
+        let batch: Vec<f32> = rows
+            .iter()
+            .flat_map(|&i| &req.observations[i * obs_dim..(i + 1) * obs_dim])
+            .copied()
+            .collect();
+        let labelled = match teacher.actor_critic.act_deterministic(&batch) {
+            Ok(a) => a,
             Err(e) => return fail(req.request_id, format!("teacher inference: {e}")),
+        };
+        let width = labelled.len() / rows.len();
+        if act_dim == 0 {
+            act_dim = width;
+            actions = vec![0.0; n * act_dim];
+        } else if width != act_dim {
+            return fail(
+                req.request_id,
+                format!("the teachers' action sizes differ: {act_dim} and {width}"),
+            );
         }
-        roles.push(role as i32);
-        versions.push(teacher.version);
+        for (k, &i) in rows.iter().enumerate() {
+            actions[i * act_dim..(i + 1) * act_dim]
+                .copy_from_slice(&labelled[k * act_dim..(k + 1) * act_dim]);
+            versions[i] = teacher.version;
+        }
     }
     LabelReply {
         request_id: req.request_id,
         num_states: req.num_states,
         act_dim: act_dim as u32,
         actions,
-        teachers: roles,
+        teachers: roles.iter().map(|&r| r as i32).collect(),
         teacher_versions: versions,
         ..LabelReply::versioned()
     }
+}
+
+/// Labels `rows` made-up states of the teachers' observation size `repeats` times, batched as
+/// [`answer`] does and one forward pass per state as it did before, half the states in each
+/// cycle: (batched states/s, per-state states/s), the median of `repeats` timings each. For
+/// BENCHMARKS.md (`lhm-dagger-server --bench`).
+pub fn bench_labels(
+    teachers: &Teachers,
+    rows: usize,
+    repeats: usize,
+) -> Result<(f64, f64), String> {
+    let t1 = teachers.teacher1.as_ref().ok_or("no teacher1")?;
+    let obs_dim = t1.spec.obs_dim;
+    let request = LabelRequest {
+        run_id: "bench".into(),
+        request_id: 1,
+        num_states: rows as u32,
+        obs_dim: obs_dim as u32,
+        // Spread over [-1, 1) without a random number generator.
+        observations: (0..rows * obs_dim)
+            .map(|i| ((i * 7919) % 2000) as f32 / 1000.0 - 1.0)
+            .collect(),
+        stages: (0..rows)
+            .map(|i| if i % 2 == 0 { Stage::FirstCycle } else { Stage::NextCycle } as i32)
+            .collect(),
+        ..LabelRequest::versioned()
+    };
+    let bytes = request.encode_checked().map_err(|e| e.to_string())?;
+    let median = |mut xs: Vec<f64>| {
+        xs.sort_by(f64::total_cmp);
+        xs[xs.len() / 2]
+    };
+    let mut batched = Vec::new();
+    let mut single = Vec::new();
+    for _ in 0..repeats.max(1) {
+        let start = std::time::Instant::now();
+        let reply = answer(&bytes, teachers);
+        if !reply.error.is_empty() {
+            return Err(reply.error);
+        }
+        batched.push(rows as f64 / start.elapsed().as_secs_f64());
+        let start = std::time::Instant::now();
+        for i in 0..rows {
+            let teacher =
+                match teacher_for(Stage::try_from(request.stages[i]).unwrap_or(Stage::Unspecified))
+                {
+                    Role::Teacher2 => teachers.teacher2.as_ref().unwrap_or(t1),
+                    _ => t1,
+                };
+            teacher
+                .actor_critic
+                .act_deterministic(&request.observations[i * obs_dim..(i + 1) * obs_dim])
+                .map_err(|e| e.to_string())?;
+        }
+        single.push(rows as f64 / start.elapsed().as_secs_f64());
+    }
+    Ok((median(batched), median(single)))
 }
 
 /// Shared, updatable teachers for the queryable callback.

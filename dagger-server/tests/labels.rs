@@ -100,3 +100,39 @@ fn missing_teachers_and_bad_requests_are_error_replies() {
     assert!(reply.error.contains("observations"), "{}", reply.error);
     assert!(teachers.update(&[1, 2, 3]).is_err());
 }
+
+#[test]
+fn interleaved_stages_come_back_in_request_order_from_one_pass_per_teacher() {
+    let (t1, b1) = teacher(Role::Teacher1, 1, 10);
+    let (t2, b2) = teacher(Role::Teacher2, 2, 20);
+    let mut teachers = Teachers::default();
+    teachers.update(&b1).unwrap();
+    teachers.update(&b2).unwrap();
+    let stages = [
+        Stage::NextCycle,
+        Stage::FirstCycle,
+        Stage::FirstCycle,
+        Stage::NextCycle,
+        Stage::FirstCycle,
+    ];
+    let reply = answer(&request(&stages), &teachers);
+    assert_eq!(reply.error, "");
+    assert_eq!(reply.actions.len(), stages.len() * 2);
+    let obs: Vec<f32> = (0..stages.len() * 3)
+        .map(|i| i as f32 * 0.1 - 0.2)
+        .collect();
+    for (i, stage) in stages.iter().enumerate() {
+        let (net, role, version) = match stage {
+            Stage::NextCycle => (&t2, Role::Teacher2, 20),
+            _ => (&t1, Role::Teacher1, 10),
+        };
+        let want = net.act_deterministic(&obs[i * 3..i * 3 + 3]).unwrap();
+        let got = &reply.actions[i * 2..i * 2 + 2];
+        for (a, b) in got.iter().zip(&want) {
+            // A batched pass may round differently from a single row.
+            assert!((a - b).abs() < 1e-5, "row {i}: {got:?} vs {want:?}");
+        }
+        assert_eq!(reply.teachers[i], role as i32, "row {i}");
+        assert_eq!(reply.teacher_versions[i], version, "row {i}");
+    }
+}
