@@ -103,10 +103,12 @@ pub fn power_penalty(torques: &[f32], joint_velocities: &[f32]) -> f32 {
 /// Imitation of a reference motion, DeepMimic's tracking reward (Peng et al. 2018, eq. 5-9), over
 /// body states in the world frame: `sim` is the character now, `reference` where the clip says it
 /// should be (the same bodies, the root first), `end_effectors` the indices of the feet and hands.
-/// In [0, 1]:
-/// 0.65 · exp(-2 Σ angle(body rotation)²) + 0.1 · exp(-0.1 Σ |angular velocity error|²)
-/// + 0.15 · exp(-40 Σ |end-effector error relative to the root|²)
-/// + 0.1 · exp(-10 (|root position error|² + 0.1 |root velocity error|²)).
+/// In [0, 1], the sum of
+/// - pose: 0.65 · exp(-2 Σ angle(body rotation)²),
+/// - velocity: 0.1 · exp(-0.1 Σ |angular velocity error|²),
+/// - end effectors: 0.15 · exp(-40 Σ |end-effector error relative to the root|²),
+/// - root: 0.1 · exp(-10 (|root position error|² + 0.1 |root velocity error|²)).
+///
 /// DeepMimic sums local joint rotations; world rotations are used here (the root's included), so
 /// a wrong heading costs on every body, which keeps the character on the reference's course.
 pub fn imitation(sim: &[BodyState], reference: &[BodyState], end_effectors: &[usize]) -> f32 {
