@@ -13,6 +13,17 @@ pub enum LearnerError {
     Candle(#[from] candle_core::Error),
     #[error("invalid input: {0}")]
     Invalid(String),
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: std::path::PathBuf,
+        source: std::io::Error,
+    },
+    /// A file on disk is not what it should be (named, with what is wrong).
+    #[error("{}: {message}", path.display())]
+    Corrupt {
+        path: std::path::PathBuf,
+        message: String,
+    },
 }
 
 pub type LearnerResult<T> = Result<T, LearnerError>;

@@ -3,6 +3,7 @@
 
 pub mod amp;
 pub mod bench;
+pub mod dagger;
 pub mod error;
 pub mod gae;
 pub mod ppo;
