@@ -177,11 +177,16 @@ impl LearnerWatch {
     /// stop is requested; whether it came back.
     fn wait_back(&mut self) -> bool {
         while !shutdown::requested() {
-            if let Ok(Some(sample)) = self.sub.recv_timeout(Duration::from_millis(200)) {
-                self.apply(sample.kind());
-                if self.gone_since.is_none() {
-                    return true;
+            match self.sub.recv_timeout(Duration::from_millis(200)) {
+                Ok(Some(sample)) => {
+                    self.apply(sample.kind());
+                    if self.gone_since.is_none() {
+                        return true;
+                    }
                 }
+                Ok(None) => {}
+                // The subscriber is gone (session closing): wait like a timeout would, not spin.
+                Err(_) => std::thread::sleep(Duration::from_millis(200)),
             }
         }
         false

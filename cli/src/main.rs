@@ -104,7 +104,13 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Train(args) => cluster_cmd::train(args).map(|()| ExitCode::SUCCESS),
-        Command::Pipeline(args) => pipeline_cmd::run(args).map(|()| ExitCode::SUCCESS),
+        Command::Pipeline(args) => pipeline_cmd::run(args).map(|finished| {
+            if finished {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(pipeline_cmd::STOPPED_EXIT)
+            }
+        }),
         Command::Learner(args) => cluster_cmd::learner(args).map(|()| ExitCode::SUCCESS),
         Command::Actor(args) => cluster_cmd::actor(args).map(|()| ExitCode::SUCCESS),
         Command::Record(args) => record_cmd::run(args).map(|()| ExitCode::SUCCESS),

@@ -176,7 +176,12 @@ fn iterations_done(run_dir: &Path) -> Result<u64> {
     Ok(json.get("iteration").and_then(|v| v.as_u64()).unwrap_or(0))
 }
 
-pub fn run(args: PipelineArgs) -> Result<()> {
+/// Exit status of a pipeline stopped by SIGINT/SIGTERM before it finished (128 + SIGINT, as a
+/// shell reports Ctrl-C), so scripts can tell it from a finished one.
+pub const STOPPED_EXIT: u8 = 130;
+
+/// Runs (or continues) the pipeline; `Ok(false)` when a stop request cut it short.
+pub fn run(args: PipelineArgs) -> Result<bool> {
     shutdown::install();
     let config = match &args.config {
         Some(path) => PipelineConfig::from_toml_file(path)?,
@@ -195,6 +200,7 @@ pub fn run(args: PipelineArgs) -> Result<()> {
     // The Teacher 1 policy later stages start from: t1's, then t1-rr's once that has run.
     let mut teacher1: Option<PathBuf> = None;
     let mut teacher2: Option<PathBuf> = None;
+    let mut upstream_trained = false;
     for (spec, stage) in config.stages.iter().zip(&stages) {
         let mut train = match &spec.config {
             Some(path) => TrainConfig::from_toml_file(path)?,
@@ -210,6 +216,15 @@ pub fn run(args: PipelineArgs) -> Result<()> {
         train.check()?;
         let dir = train.run_dir();
         let done = iterations_done(&dir)?;
+        if done > 0 && upstream_trained {
+            // Its start (an earlier stage's policy) changed in this session; it is not redone.
+            println!(
+                "stage {}: warning: made from an earlier stage's policy before that stage trained \
+                 further; delete {} to redo it from the new one",
+                stage.name(),
+                dir.display()
+            );
+        }
         if done >= spec.iterations {
             println!(
                 "stage {}: finished ({done} of {} iterations) in {}",
@@ -225,6 +240,7 @@ pub fn run(args: PipelineArgs) -> Result<()> {
                 spec.iterations,
                 dir.display()
             );
+            upstream_trained = true;
             let demo = demo_for(args.motion_dir.clone(), &train)?;
             train_locally(train, demo, &local)
                 .with_context(|| format!("stage {}", stage.name()))?;
@@ -234,7 +250,7 @@ pub fn run(args: PipelineArgs) -> Result<()> {
                     config.name,
                     stage.name()
                 );
-                return Ok(());
+                return Ok(false);
             }
             let reached = iterations_done(&dir)?;
             if reached < spec.iterations {
@@ -256,13 +272,20 @@ pub fn run(args: PipelineArgs) -> Result<()> {
     if let Some(t1) = &teacher1 {
         evaluate(&config, &root, t1, teacher2.as_deref(), &args.scenes)?;
     }
+    if shutdown::requested() {
+        println!(
+            "pipeline {} stopped in eval; run the same command again to continue",
+            config.name
+        );
+        return Ok(false);
+    }
     println!(
         "pipeline {}: every stage finished ({:.0} s this session); runs in {}",
         config.name,
         started.elapsed().as_secs_f64(),
         root.display()
     );
-    Ok(())
+    Ok(true)
 }
 
 /// `lhm eval` on each split: the last Teacher 1 policy on the tasks' first pairs into

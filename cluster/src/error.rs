@@ -27,7 +27,8 @@ impl ClusterError {
 /// Zenoh's errors end in the source location that raised them (` at /…/zenoh-1.x/src/….rs:447.`),
 /// which tells a user nothing: cut it.
 pub fn without_source_location(message: &str) -> String {
-    match message.find(" at /") {
+    // The last " at /…rs:N" is the location; an earlier " at /path" may be part of the message.
+    match message.rfind(" at /") {
         Some(i) if message[i..].contains(".rs:") => message[..i].trim_end().to_owned(),
         _ => message.to_owned(),
     }
@@ -46,6 +47,11 @@ mod tests {
         assert_eq!(
             without_source_location(raw),
             "Unable to connect to any of [Single(tcp/127.0.0.1:9)]!"
+        );
+        let with_path = "cannot read config at /etc/zenoh.json5 at /src/x.rs:3";
+        assert_eq!(
+            without_source_location(with_path),
+            "cannot read config at /etc/zenoh.json5"
         );
         assert_eq!(without_source_location("look at /tmp/x"), "look at /tmp/x");
     }

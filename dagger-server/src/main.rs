@@ -42,12 +42,20 @@ fn main() -> Result<()> {
         connect: args.connect,
         zenoh_config: args.zenoh_config,
     };
-    let session = open_session_retrying(
+    let session = match open_session_retrying(
         NodeMode::Client,
         &endpoints,
         Duration::from_millis(500),
         || !shutdown::requested(),
-    )?;
+    ) {
+        Ok(s) => s,
+        // SIGTERM/Ctrl-C while still waiting for the learner: a clean stop, as the actor's.
+        Err(e @ lhm_cluster::ClusterError::Stopped(_)) => {
+            tracing::info!("{e}");
+            return Ok(());
+        }
+        Err(e) => return Err(e.into()),
+    };
     let teachers = SharedTeachers::default();
     let mut subscribers = Vec::new();
     for role in [Role::Teacher1, Role::Teacher2] {

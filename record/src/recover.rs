@@ -50,6 +50,30 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecordError
         path: tmp.clone(),
         source,
     })?;
+    // Whatever goes wrong from here on, no half-written temporary is left behind.
+    let report = match write_recovered(&bytes, input, output, &tmp, file) {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e);
+        }
+    };
+    std::fs::rename(&tmp, output).map_err(|source| RecordError::Close {
+        path: output.to_path_buf(),
+        source,
+    })?;
+    Ok(report)
+}
+
+/// Copies the complete records of `bytes` (the file `input`) into `file` (the temporary `tmp`
+/// that becomes `output`), finished and synced.
+fn write_recovered(
+    bytes: &[u8],
+    input: &Path,
+    output: &Path,
+    tmp: &Path,
+    file: File,
+) -> Result<RecoverReport, RecordError> {
     let mcap_err = |source| RecordError::Mcap {
         path: output.to_path_buf(),
         source,
@@ -62,17 +86,18 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecordError
     let mut report = RecoverReport::default();
     let mut schemas = HashSet::new();
     let mut channels = HashSet::new();
-    let records = ChunkFlattener::new_with_options(&bytes, Options::IgnoreEndMagic.into())
-        .map_err(|e| RecordError::Recover {
-            path: input.to_path_buf(),
-            reason: format!("not an MCAP file: {e}"),
+    let records =
+        ChunkFlattener::new_with_options(bytes, Options::IgnoreEndMagic.into()).map_err(|e| {
+            RecordError::Recover {
+                path: input.to_path_buf(),
+                reason: format!("not an MCAP file: {e}"),
+            }
         })?;
     for (i, record) in records.enumerate() {
         let record = match record {
             Ok(r) => r,
             Err(e) if i == 0 => {
                 drop(writer);
-                let _ = std::fs::remove_file(&tmp);
                 return Err(RecordError::Recover {
                     path: input.to_path_buf(),
                     reason: format!("not an MCAP file: {e}"),
@@ -138,15 +163,11 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecordError
         .into_inner()
         .into_inner()
         .map_err(|e| RecordError::Close {
-            path: tmp.clone(),
+            path: tmp.to_path_buf(),
             source: e.into_error(),
         })?;
     file.sync_all().map_err(|source| RecordError::Close {
-        path: tmp.clone(),
-        source,
-    })?;
-    std::fs::rename(&tmp, output).map_err(|source| RecordError::Close {
-        path: output.to_path_buf(),
+        path: tmp.to_path_buf(),
         source,
     })?;
     Ok(report)

@@ -868,7 +868,10 @@ pub fn run_learner(
         }
         weights_pub.put(bytes).wait().map_err(zerr)?;
         let it = learner.counters.iteration;
-        if config.checkpoint_every > 0 && it % config.checkpoint_every == 0 {
+        // The last iteration of a budget is saved before status.json reports it: `lhm pipeline`
+        // takes a stage whose status reached its budget as finished, checkpoint included.
+        let last = config.max_iterations.is_some_and(|max| it >= max);
+        if last || (config.checkpoint_every > 0 && it % config.checkpoint_every == 0) {
             learner.save(&stem)?;
             learner.save_policy(&run_dir.join("policy"))?;
         }

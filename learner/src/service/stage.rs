@@ -55,9 +55,11 @@ impl Stage {
     /// from (`t1-rr`: its weights; `t2`: the frozen policy that plays each episode's first pair,
     /// and T2's starting weights): a checkpoint stem such as `runs/p/t1/policy`.
     ///
-    /// - `t1`: role teacher1, as configured.
-    /// - `t1-rr`: role teacher1, initialised from `teacher1`, release-and-retreat weight
-    ///   [`DEFAULT_RELEASE_RETREAT_WEIGHT`] unless the configuration sets one.
+    /// - `t1`: role teacher1, as configured (a `teacher1` is refused: t1 starts from scratch).
+    /// - `t1-rr`: role teacher1, initialised from the configuration's `init_from` if it has one,
+    ///   else from `teacher1`; release-and-retreat weight [`DEFAULT_RELEASE_RETREAT_WEIGHT`]
+    ///   unless the configuration sets a positive one (0 reads as unset: a t1-rr without the term
+    ///   is a t1 run with `init_from`).
     /// - `t2`: role teacher2 with `teacher1` frozen for the first pair, initialised from it,
     ///   on the two-object training tasks unless the configuration lists others.
     pub fn apply(
@@ -75,12 +77,20 @@ impl Stage {
         };
         match self {
             Stage::T1 => {
+                if let Some(t) = teacher1 {
+                    return Err(ServiceError::Config(format!(
+                        "stage t1 trains from scratch; a Teacher 1 ({}) is for t1-rr (--init-from) \
+                         and t2 (--teacher1)",
+                        t.display()
+                    )));
+                }
                 config.role = "teacher1".into();
             }
             Stage::T1Rr => {
+                // An explicit init_from (the stage's configuration, --init-from) wins.
                 let from: PathBuf = match (&config.init_from, teacher1) {
-                    (_, Some(t)) => t.to_path_buf(),
-                    (Some(i), None) => i.clone(),
+                    (Some(i), _) => i.clone(),
+                    (None, Some(t)) => t.to_path_buf(),
                     (None, None) => need("--init-from")?,
                 };
                 config.role = "teacher1".into();
@@ -116,6 +126,9 @@ mod tests {
     #[test]
     fn each_stage_sets_its_role_start_and_reward() {
         let mut t1 = TrainConfig::default();
+        assert!(Stage::T1
+            .apply(&mut t1, Some(Path::new("x/policy")))
+            .is_err());
         Stage::T1.apply(&mut t1, None).unwrap();
         assert_eq!(t1.role, "teacher1");
         assert_eq!(t1.env.weights.release_retreat, 0.0);
@@ -140,6 +153,15 @@ mod tests {
             .apply(&mut rr2, Some(Path::new("a/policy")))
             .unwrap();
         assert_eq!(rr2.env.weights.release_retreat, 2.0);
+        // An explicit init_from wins over the previous stage's policy.
+        let mut rr3 = TrainConfig {
+            init_from: Some(PathBuf::from("mine/policy")),
+            ..TrainConfig::default()
+        };
+        Stage::T1Rr
+            .apply(&mut rr3, Some(Path::new("runs/p/t1/policy")))
+            .unwrap();
+        assert_eq!(rr3.init_from.as_deref(), Some(Path::new("mine/policy")));
 
         let mut t2 = TrainConfig::default();
         assert!(
