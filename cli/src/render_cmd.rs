@@ -66,6 +66,60 @@ pub struct RenderRolloutArgs {
     /// Seed of the random and stochastic policies.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Start from a reference-motion frame instead of the task's start pose, as training's demo
+    /// starts do: `CLIP` (an installed clip's name, e.g. walk_forward) at `SECONDS` into it
+    /// (default 0.5), turned toward the first object. Walking clips: an OMOMO clip starts without
+    /// its box.
+    #[arg(long, value_name = "CLIP[@SECONDS]")]
+    demo_start: Option<String>,
+    /// Where `scripts/install-motions` put the clips (for --demo-start; default: $LHM_MOTION_DIR or
+    /// ~/.cache/lhm/motions).
+    #[arg(long)]
+    motion_dir: Option<std::path::PathBuf>,
+}
+
+/// Starts `env` from `spec` (`CLIP[@SECONDS]`) of the installed clips, turned toward the first
+/// object; the clip's name, time and the clips there are in the error when it is not found.
+fn demo_start(
+    env: &mut TaskEnv,
+    spec: &str,
+    motion_dir: Option<std::path::PathBuf>,
+    train: &TrainConfig,
+) -> Result<()> {
+    let (name, t) = match spec.split_once('@') {
+        Some((n, t)) => (
+            n,
+            t.parse::<f32>()
+                .ok()
+                .filter(|t| t.is_finite() && *t >= 0.0)
+                .with_context(|| {
+                    format!("--demo-start {spec:?}: {t:?} is not a time in seconds")
+                })?,
+        ),
+        None => (spec, 0.5),
+    };
+    let dir = motion_dir.unwrap_or_else(lhm_sim::motion::default_dir);
+    let demo = lhm_sim::motion::DemoMotion::load_dir(
+        &env.model,
+        &dir,
+        lhm_sim::motion::AmpWindow::of(&train.env, &train.sim),
+    )
+    .with_context(|| format!("--demo-start needs the motion clips in {}", dir.display()))?;
+    let clips: Vec<(String, f32)> = demo.clips().map(|(n, d)| (n.to_owned(), d)).collect();
+    let Some(index) = clips.iter().position(|(n, _)| n == name) else {
+        let names: Vec<&str> = clips.iter().map(|(n, _)| n.as_str()).collect();
+        bail!(
+            "--demo-start: no clip {name:?}; installed: {}",
+            names.join(", ")
+        );
+    };
+    let duration = clips[index].1;
+    if t > duration {
+        bail!("--demo-start: {name} is {duration:.2} s long, not {t} s");
+    }
+    let yaw = env.yaw_toward_first_object();
+    env.start_from_demo_heading(&demo, index, t, yaw);
+    Ok(())
 }
 
 pub fn run(a: RenderRolloutArgs) -> Result<()> {
@@ -100,6 +154,9 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         train.sim.clone(),
         train.env.clone(),
     );
+    if let Some(spec) = &a.demo_start {
+        demo_start(&mut env, spec, a.motion_dir.clone(), &train)?;
+    }
     let mut rng = SplitMix64::new(a.seed);
     let mut net_rng = lhm_nets::SplitMix64::new(a.seed);
     let steps = (a.seconds * train.sim.control_hz).round() as usize;
