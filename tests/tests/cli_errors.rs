@@ -133,3 +133,51 @@ fn scenes_dir_is_read_or_refused_by_name() {
     assert!(std::fs::metadata(&png).is_ok_and(|m| m.len() > 0));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn bad_stages_pipelines_and_demo_starts_are_refused_by_name() {
+    // A stage that needs a Teacher 1, one that is not built, t1 given a Teacher 1.
+    for (args, expected) in [
+        (vec!["train", "--no-amp", "--stage", "t1-rr"], "--init-from"),
+        (vec!["train", "--no-amp", "--stage", "t2"], "--teacher1"),
+        (
+            vec!["train", "--no-amp", "--stage", "student"],
+            "not built yet",
+        ),
+        (
+            vec![
+                "train",
+                "--no-amp",
+                "--stage",
+                "t1",
+                "--teacher1",
+                "x/policy",
+            ],
+            "from scratch",
+        ),
+    ] {
+        let (ok, stderr) = run(&args);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+    }
+    let dir = std::env::temp_dir().join(format!("lhm-cli-pipeline-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[[stage]]\nstage = \"t2\"\niterations = 5\n").unwrap();
+    let (ok, stderr) = run(&["pipeline", "--config", &bad.display().to_string()]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("bad.toml") && stderr.contains("Teacher 1 stage"),
+        "{stderr}"
+    );
+    // render-rollout: a malformed demo-start time is refused before anything loads.
+    let out = Command::new(lhm())
+        .args(["render-rollout", "train-0001", "--demo-start", "walk@soon"])
+        .args(["-o", &dir.join("x.gif").display().to_string()])
+        .output()
+        .expect("running lhm");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("not a time in seconds"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
