@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use candle_core::Tensor;
 use lhm_nets::adam::{clip_global_norm, gradients};
+use lhm_nets::checkpoint::write_atomic;
 use lhm_nets::{ActorCritic, Adam, AdamConfig, SplitMix64};
 use serde::{Deserialize, Serialize};
 
@@ -167,7 +168,7 @@ impl DaggerDataset {
         }
         let seq = self.index.next_shard;
         let bytes: Vec<u8> = round.iter().flat_map(|x| x.to_le_bytes()).collect();
-        write_atomically(&shard_path(&self.dir, seq), &bytes)?;
+        write_atomic(&shard_path(&self.dir, seq), &bytes, "dagger-shard")?;
         let mut index = self.index.clone();
         index.shards.push((seq, n));
         index.next_shard = seq + 1;
@@ -181,7 +182,7 @@ impl DaggerDataset {
         }
         let text = serde_json::to_vec_pretty(&index)
             .map_err(|e| LearnerError::Invalid(format!("dataset index: {e}")))?;
-        write_atomically(&self.dir.join(INDEX_FILE), &text)?;
+        write_atomic(&self.dir.join(INDEX_FILE), &text, "dagger-index")?;
         // Only now is the new state saved; the dropped files are garbage.
         self.index = index;
         let dropped_rows: usize = dropped.iter().map(|d| d.1).sum();
@@ -207,7 +208,9 @@ impl DaggerDataset {
             let path = entry.map_err(io(&self.dir))?.path();
             let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
             let stray_shard = name.starts_with("shard-") && !listed.contains(&path);
-            if stray_shard || name.starts_with(".tmp-") {
+            // `write_atomic`'s temporaries: `.<name>.tmp-<pid>`.
+            let temporary = name.starts_with('.') && name.contains(".tmp-");
+            if stray_shard || temporary {
                 fs::remove_file(&path).map_err(io(&path))?;
             }
         }
@@ -224,15 +227,6 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> LearnerError + '_ {
         path: path.to_owned(),
         source,
     }
-}
-
-fn write_atomically(path: &Path, bytes: &[u8]) -> LearnerResult<()> {
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("file");
-    let tmp = path.with_file_name(format!(".tmp-{name}"));
-    let file = fs::File::create(&tmp).map_err(io(&tmp))?;
-    std::io::Write::write_all(&mut &file, bytes).map_err(io(&tmp))?;
-    file.sync_all().map_err(io(&tmp))?;
-    fs::rename(&tmp, path).map_err(io(path))
 }
 
 /// Settings of the student's regression.
@@ -436,10 +430,10 @@ mod tests {
         drop(d);
         // A shard written but never listed, and a half-written temporary.
         fs::write(shard_path(&dir, 1), [0u8; 24]).unwrap();
-        fs::write(dir.join(".tmp-index.json"), b"{").unwrap();
+        fs::write(dir.join(".index.json.tmp-1234"), b"{").unwrap();
         let d = DaggerDataset::open(&dir, 4, 2, 100).unwrap();
         assert_eq!(d.len(), 5);
-        assert!(!shard_path(&dir, 1).exists() && !dir.join(".tmp-index.json").exists());
+        assert!(!shard_path(&dir, 1).exists() && !dir.join(".index.json.tmp-1234").exists());
         drop(d);
         // Another layout is refused by name.
         let e = DaggerDataset::open(&dir, 3, 2, 100)

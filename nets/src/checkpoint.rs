@@ -205,9 +205,10 @@ fn dtype_name(t: &Tensor) -> String {
     format!("{:?}", t.dtype()).to_lowercase()
 }
 
-/// Writes `bytes` to `path` through a temporary file; `point` names the fault-injection points
-/// (`<point>-written` before the rename, `<point>-renamed` after it).
-fn write_atomic(path: &Path, bytes: &[u8], point: &str) -> CheckpointResult<()> {
+/// Writes `bytes` to `path` through a temporary file (`.<name>.tmp-<pid>`, removed on failure)
+/// and syncs the file and the rename; `point` names the fault-injection points (`<point>-written`
+/// before the rename, `<point>-renamed` after it). Also the DAgger dataset's writer.
+pub fn write_atomic(path: &Path, bytes: &[u8], point: &str) -> CheckpointResult<()> {
     let io = |action: &'static str| {
         move |source| CheckpointError::Io {
             path: path.to_owned(),
