@@ -16,9 +16,14 @@
 //! leaves no state Teacher 2 could start from in a reset-free episode: that episode is dropped
 //! and another drawn. A cycle that times out unplaced still hands off, as at evaluation, where
 //! the same switch hands Teacher 2 whatever Teacher 1 left.
+//!
+//! The student's rollouts (role `student`, [`Behaviour::Dagger`]) play whole multi-object tasks
+//! reset-free; every state is labelled by the teachers through a [`Labeller`] (first cycle:
+//! Teacher 1, later cycles: Teacher 2), a step executes the teachers' action with probability β
+//! and the student's mean action otherwise, and the chunks carry the labels as actions.
 
 use lhm_nets::{ActorCritic, SplitMix64};
-use lhm_protos::{EpisodeStats, Role, TrajectoryChunk, WireMessage};
+use lhm_protos::{EpisodeStats, Role, Stage, TrajectoryChunk, WireMessage};
 use lhm_scenes::{Benchmark, Catalogue, Task};
 use lhm_sim::env::TaskEnv;
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
@@ -37,6 +42,51 @@ pub enum RolloutError {
     Net(#[from] lhm_nets::NetError),
     #[error("Teacher 1 completed no first cycle in {0} episodes in a row (it fell or its episode ended each time): train it further before Teacher 2")]
     Teacher1Fails(u32),
+    #[error("teacher labels: {0}")]
+    Labels(String),
+}
+
+/// Teacher actions for a batch of student states: the dagger-server over Zenoh in a cluster, a
+/// local teacher in tests.
+pub trait Labeller {
+    /// One row of `act_dim` actions per row of `observations`, each from the teacher that
+    /// supervises its `stages` entry (first cycle: Teacher 1, later cycles: Teacher 2).
+    fn label(&mut self, observations: &[f32], stages: &[Stage]) -> Result<Vec<f32>, String>;
+}
+
+/// Who acts in a rollout and what its chunks carry: the actor's seam between the stages.
+pub enum Behaviour<'a> {
+    /// PPO's behaviour policy (the teachers): sampled actions with their log-probabilities and
+    /// the critic's values.
+    Sampled(&'a ActorCritic),
+    /// DAgger (the student): every state is labelled by the teachers and the chunk carries those
+    /// labels as its actions (the regression targets; log-probabilities and values are 0). A step
+    /// executes the teachers' action with probability `teacher_mix` (DAgger's β), else the
+    /// student's mean action.
+    Dagger {
+        student: &'a ActorCritic,
+        labeller: &'a mut dyn Labeller,
+        teacher_mix: f32,
+    },
+}
+
+/// The supervising teacher's stage of a state: the episode's first cycle or a later one.
+pub fn label_stage(env: &TaskEnv) -> Stage {
+    if env.cycles.current == 0 {
+        Stage::FirstCycle
+    } else {
+        Stage::NextCycle
+    }
+}
+
+/// What a batch step executes and what its chunk rows record.
+struct Acted {
+    /// Actions the environments execute.
+    executed: Vec<f32>,
+    /// Actions the chunk records (sampled actions, or the teachers' labels).
+    recorded: Vec<f32>,
+    log_probs: Vec<f32>,
+    values: Vec<f32>,
 }
 
 /// How Teacher 1's run on the first pair of an episode ended.
@@ -372,17 +422,71 @@ impl Rollout {
         self.spec = spec;
     }
 
-    /// One control step of every environment with `ac` (policy version `version`).
+    /// One control step of every environment with PPO's sampled actions of `ac` (policy version
+    /// `version`).
     pub fn step(&mut self, ac: &ActorCritic, version: u64) -> Result<StepOutput, RolloutError> {
+        self.step_with(Behaviour::Sampled(ac), version)
+    }
+
+    /// The actions of one batch step under `behaviour`.
+    fn act(&mut self, behaviour: &mut Behaviour<'_>, obs: &[f32]) -> Result<Acted, RolloutError> {
+        match behaviour {
+            Behaviour::Sampled(ac) => {
+                let act = ac.act(obs, &mut self.rng)?;
+                Ok(Acted {
+                    executed: act.actions.clone(),
+                    recorded: act.actions,
+                    log_probs: act.log_probs,
+                    values: act.values,
+                })
+            }
+            Behaviour::Dagger {
+                student,
+                labeller,
+                teacher_mix,
+            } => {
+                let n = self.slots.len();
+                let act_dim = self.spec.act_dim;
+                let stages: Vec<Stage> = self.slots.iter().map(|s| label_stage(&s.env)).collect();
+                let labels = labeller.label(obs, &stages).map_err(RolloutError::Labels)?;
+                if labels.len() != n * act_dim {
+                    return Err(RolloutError::Labels(format!(
+                        "{} label values for {n} states of {act_dim} actions",
+                        labels.len()
+                    )));
+                }
+                let mut executed = student.act_deterministic(obs)?;
+                for i in 0..n {
+                    if (self.rng.next_f64() as f32) < *teacher_mix {
+                        executed[i * act_dim..(i + 1) * act_dim]
+                            .copy_from_slice(&labels[i * act_dim..(i + 1) * act_dim]);
+                    }
+                }
+                Ok(Acted {
+                    executed,
+                    recorded: labels,
+                    log_probs: vec![0.0; n],
+                    values: vec![0.0; n],
+                })
+            }
+        }
+    }
+
+    /// One control step of every environment under `behaviour` (policy version `version`).
+    pub fn step_with(
+        &mut self,
+        mut behaviour: Behaviour<'_>,
+        version: u64,
+    ) -> Result<StepOutput, RolloutError> {
         self.policy_version = version;
         let obs: Vec<f32> = self.slots.iter().flat_map(|s| s.obs.clone()).collect();
-        let act = ac.act(&obs, &mut self.rng)?;
+        let act = self.act(&mut behaviour, &obs)?;
         let act_dim = self.spec.act_dim;
         let mut out = StepOutput::default();
         // Environments whose episode ended by time limit need V(final observation).
         let mut truncated_obs: Vec<(usize, Vec<f32>)> = Vec::new();
         for i in 0..self.slots.len() {
-            let action = &act.actions[i * act_dim..(i + 1) * act_dim];
+            let action = &act.executed[i * act_dim..(i + 1) * act_dim];
             let slot = &mut self.slots[i];
             let result = slot.env.step(action);
             self.env_steps += 1;
@@ -393,7 +497,8 @@ impl Rollout {
             }
             let buf = &mut slot.buf;
             buf.observations.extend_from_slice(&slot.obs);
-            buf.actions.extend_from_slice(action);
+            buf.actions
+                .extend_from_slice(&act.recorded[i * act_dim..(i + 1) * act_dim]);
             buf.log_probs.push(act.log_probs[i]);
             buf.values.push(act.values[i]);
             buf.rewards.push(result.reward);
@@ -446,7 +551,12 @@ impl Rollout {
                 slot.obs = slot.env.observation();
             }
         }
-        if !truncated_obs.is_empty() {
+        let critic = match &behaviour {
+            Behaviour::Sampled(ac) => Some(*ac),
+            // A regression target needs no value.
+            Behaviour::Dagger { .. } => None,
+        };
+        if let (false, Some(ac)) = (truncated_obs.is_empty(), critic) {
             let rows: Vec<f32> = truncated_obs.iter().flat_map(|(_, o)| o.clone()).collect();
             let values = ac.values(&rows)?;
             for ((i, _), v) in truncated_obs.iter().zip(values) {
@@ -470,19 +580,25 @@ impl Rollout {
             }
         }
         if self.slots[0].buf.rewards.len() >= self.spec.chunk_steps as usize {
-            self.emit_chunks(ac, version, &mut out)?;
+            self.emit_chunks(critic, version, &mut out)?;
         }
         Ok(out)
     }
 
+    /// Cuts every environment's chunk; `critic` gives the bootstrap values (none: 0).
     fn emit_chunks(
         &mut self,
-        ac: &ActorCritic,
+        critic: Option<&ActorCritic>,
         version: u64,
         out: &mut StepOutput,
     ) -> Result<(), RolloutError> {
-        let obs: Vec<f32> = self.slots.iter().flat_map(|s| s.obs.clone()).collect();
-        let bootstrap = ac.values(&obs)?;
+        let bootstrap = match critic {
+            Some(ac) => {
+                let obs: Vec<f32> = self.slots.iter().flat_map(|s| s.obs.clone()).collect();
+                ac.values(&obs)?
+            }
+            None => vec![0.0; self.slots.len()],
+        };
         for (i, slot) in self.slots.iter_mut().enumerate() {
             let buf = std::mem::take(&mut slot.buf);
             self.chunk_seq += 1;

@@ -10,7 +10,8 @@ use lhm_scenes::Benchmark;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::Wait;
 
-use crate::rollout::{Rollout, RolloutError};
+use crate::labels::DaggerLabels;
+use crate::rollout::{Behaviour, Rollout, RolloutError};
 
 #[derive(Debug, Clone)]
 pub struct ActorConfig {
@@ -293,6 +294,9 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
     let mut last_metrics = Instant::now();
     let mut steps_at_metrics = 0u64;
     let mut learner = LearnerWatch::new(&session, &config.run_id)?;
+    // A student acts on its own weights, mixed with the teachers', and sends their labels.
+    let mut labels =
+        (config.role == Role::Student).then(|| DaggerLabels::new(&session, &config.run_id));
     loop {
         // A stop request between steps drops the unfinished chunk: nothing partial is sent.
         if shutdown::requested() {
@@ -342,7 +346,25 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
                 }
             }
         }
-        let out = rollout.step(&policy.actor_critic, policy.version)?;
+        let stepped = match labels.as_mut() {
+            Some(labeller) => {
+                labeller.student_version = policy.version;
+                rollout.step_with(
+                    Behaviour::Dagger {
+                        student: &policy.actor_critic,
+                        labeller,
+                        teacher_mix: policy.spec.teacher_mix,
+                    },
+                    policy.version,
+                )
+            }
+            None => rollout.step(&policy.actor_critic, policy.version),
+        };
+        let out = match stepped {
+            // Stopped while waiting for labels: a clean stop, the unfinished chunk dropped.
+            Err(RolloutError::Labels(_)) if shutdown::requested() => break,
+            other => other?,
+        };
         if let (true, Some(frames)) = (config.publish, out.episode_frames.as_ref()) {
             // Sampled episodes are for people to look at: they may be dropped under congestion.
             if let Ok(bytes) = frames.encode_checked() {

@@ -28,6 +28,7 @@ fn chunks_are_whole_versioned_and_valid() {
         chunk_steps: 12,
         record_every_episodes: 1,
         chunk_sets_per_version: 0,
+        teacher_mix: 0.0,
     };
     let ac = ActorCritic::new(spec.obs_dim, spec.act_dim, &spec.actor_critic).unwrap();
     let mut rollout = Rollout::new(spec.clone(), &bench, "run", "a", Role::Teacher1, 2, 7).unwrap();
@@ -78,6 +79,7 @@ fn a_spec_that_does_not_fit_the_environment_is_refused() {
         chunk_steps: 8,
         record_every_episodes: 0,
         chunk_sets_per_version: 0,
+        teacher_mix: 0.0,
     };
     let err = Rollout::new(spec, &bench, "run", "a", Role::Teacher1, 1, 0)
         .err()
@@ -112,6 +114,7 @@ fn teacher2_starts_from_teacher1s_last_state() {
         chunk_steps: 4,
         record_every_episodes: 0,
         chunk_sets_per_version: 0,
+        teacher_mix: 0.0,
     };
     let teacher1 = ActorCritic::new(
         spec.obs_dim,
@@ -181,4 +184,137 @@ fn teacher2_starts_from_teacher1s_last_state() {
         );
         assert_eq!(c.role, Role::Teacher2 as i32);
     }
+}
+
+/// A local teacher as the labeller: records the stages it was asked about.
+struct LocalTeacher {
+    teacher: ActorCritic,
+    stages_seen: Vec<lhm_protos::Stage>,
+}
+
+impl lhm_actor::Labeller for LocalTeacher {
+    fn label(
+        &mut self,
+        observations: &[f32],
+        stages: &[lhm_protos::Stage],
+    ) -> Result<Vec<f32>, String> {
+        self.stages_seen.extend_from_slice(stages);
+        self.teacher
+            .act_deterministic(observations)
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// The student's rollout (DAgger): every chunk row carries the teacher's label for the state it
+/// records, whoever acted; with β = 1 the world follows the teacher exactly, with β = 0 the
+/// student; the second cycle is labelled as a later cycle (Teacher 2's).
+#[test]
+fn a_student_rollout_records_teacher_labels_and_mixes_by_beta() {
+    use lhm_actor::Behaviour;
+    let bench = Benchmark::embedded().unwrap();
+    let model = CharacterModel::amp_humanoid();
+    let mut env = EnvConfig::default();
+    // Short cycles: an untrained pair of policies hands off on the timeout.
+    env.switching.max_cycle_steps = 5;
+    let spec = RunSpec {
+        obs_dim: TaskEnv::obs_dim(&model, &env),
+        act_dim: model.dofs.len(),
+        amp_dim: 0,
+        actor_critic: ActorCriticConfig::with_hidden(&[16]),
+        env,
+        sim: SimConfig::default(),
+        tasks: TaskSet::Ids(vec!["train-0004".into()]),
+        chunk_steps: 8,
+        record_every_episodes: 0,
+        chunk_sets_per_version: 0,
+        teacher_mix: 0.0,
+    };
+    let net = |seed| {
+        ActorCritic::new(
+            spec.obs_dim,
+            spec.act_dim,
+            &ActorCriticConfig {
+                init_seed: seed,
+                ..ActorCriticConfig::with_hidden(&[16])
+            },
+        )
+        .unwrap()
+    };
+    let (student, teacher) = (net(1), net(2));
+    // β = 1 and β = 0 from the same start, and a rollout driven by the policy itself.
+    let run = |behaviour_beta: Option<f32>, acting: &ActorCritic| {
+        let mut rollout =
+            Rollout::new(spec.clone(), &bench, "run", "a", Role::Student, 2, 5).unwrap();
+        let mut labeller = LocalTeacher {
+            teacher: teacher.clone(),
+            stages_seen: Vec::new(),
+        };
+        let mut chunks = Vec::new();
+        for _ in 0..8 {
+            let out = match behaviour_beta {
+                Some(beta) => rollout
+                    .step_with(
+                        Behaviour::Dagger {
+                            student: &student,
+                            labeller: &mut labeller,
+                            teacher_mix: beta,
+                        },
+                        3,
+                    )
+                    .unwrap(),
+                None => {
+                    // Mean actions of `acting`, as a deterministic reference trajectory.
+                    let mut driver = LocalTeacher {
+                        teacher: acting.clone(),
+                        stages_seen: Vec::new(),
+                    };
+                    rollout
+                        .step_with(
+                            Behaviour::Dagger {
+                                student: acting,
+                                labeller: &mut driver,
+                                teacher_mix: 1.0,
+                            },
+                            3,
+                        )
+                        .unwrap()
+                }
+            };
+            chunks.extend(out.chunks);
+        }
+        (chunks, labeller.stages_seen)
+    };
+    let (beta1, stages) = run(Some(1.0), &teacher);
+    let (beta0, _) = run(Some(0.0), &student);
+    let (teacher_driven, _) = run(None, &teacher);
+    let (student_driven, _) = run(None, &student);
+    assert_eq!(beta1.len(), 2);
+    for c in beta1.iter().chain(&beta0) {
+        assert_eq!(c.num_steps, 8);
+        assert_eq!(c.role, Role::Student as i32);
+        TrajectoryChunk::decode_checked(&c.encode_checked().unwrap()).unwrap();
+        // Each recorded action is the teacher's label of the recorded state.
+        assert_eq!(
+            c.actions,
+            teacher.act_deterministic(&c.observations).unwrap()
+        );
+        assert!(c.log_probs.iter().all(|&x| x == 0.0));
+    }
+    let states = |chunks: &[TrajectoryChunk]| -> Vec<Vec<f32>> {
+        chunks.iter().map(|c| c.observations.clone()).collect()
+    };
+    assert_eq!(
+        states(&beta1),
+        states(&teacher_driven),
+        "β = 1: the teacher acts"
+    );
+    assert_eq!(
+        states(&beta0),
+        states(&student_driven),
+        "β = 0: the student acts"
+    );
+    assert_ne!(states(&beta1), states(&beta0));
+    // 5-step cycles: steps 0-4 are the first cycle, then the second pair (Teacher 2's).
+    assert_eq!(stages[0], lhm_protos::Stage::FirstCycle);
+    assert!(stages.contains(&lhm_protos::Stage::NextCycle), "{stages:?}");
 }

@@ -416,6 +416,7 @@ fn bench_labels(json: bool, states: &[usize], repetitions: usize) -> Result<()> 
             chunk_steps: config.chunk_steps,
             record_every_episodes: 0,
             chunk_sets_per_version: 0,
+            teacher_mix: 0.0,
         };
         let message = lhm_cluster::encode_policy("bench", role, 1, &spec, &ac)?;
         teachers.update(&lhm_protos::WireMessage::encode_checked(&message)?)?;

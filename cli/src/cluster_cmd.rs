@@ -40,6 +40,10 @@ pub struct LearnerOpts {
     /// set to the two-object training tasks.
     #[arg(long)]
     teacher1: Option<PathBuf>,
+    /// Teacher 2's policy for the student stage (with --stage student and --teacher1): the
+    /// dagger-server labels first cycles with Teacher 1 and later cycles with it.
+    #[arg(long)]
+    teacher2: Option<PathBuf>,
     /// Start a new run from this checkpoint's policy, value function and normalisers (fine-tuning,
     /// e.g. release-and-retreat from runs/p/t1/policy); a run with its own checkpoint resumes
     /// from that instead.
@@ -47,7 +51,8 @@ pub struct LearnerOpts {
     init_from: Option<PathBuf>,
     /// Run one stage of the paper's pipeline: `t1` (Teacher 1 pretraining), `t1-rr`
     /// (release-and-retreat fine-tuning; needs --init-from the t1 policy), `t2` (Teacher 2; needs
-    /// --teacher1, and starts from that policy's weights unless --init-from says otherwise).
+    /// --teacher1, and starts from that policy's weights unless --init-from says otherwise),
+    /// `student` (DAgger distillation; needs --teacher1 and --teacher2).
     #[arg(long)]
     stage: Option<String>,
     /// Where `scripts/install-motions` put the clips (default: $LHM_MOTION_DIR or ~/.cache/lhm/motions).
@@ -88,7 +93,13 @@ impl LearnerOpts {
             config.scenes = Some(dir.clone());
         }
         if let Some(stage) = &self.stage {
-            Stage::parse(stage)?.apply(&mut config, self.teacher1.as_deref())?;
+            Stage::parse(stage)?.apply(
+                &mut config,
+                self.teacher1.as_deref(),
+                self.teacher2.as_deref(),
+            )?;
+        } else if self.teacher2.is_some() {
+            bail!("--teacher2 is for the student stage: add --stage student");
         } else if let Some(path) = &self.teacher1 {
             config.teacher1 = Some(path.clone());
             config.role = "teacher2".into();
@@ -149,6 +160,19 @@ pub struct LearnerArgs {
     /// Endpoints to listen on (<protocol>/<address>, e.g. tcp/0.0.0.0:7447).
     #[arg(long, default_value = "tcp/0.0.0.0:7447", value_parser = endpoint)]
     listen: Vec<String>,
+}
+
+#[derive(Args)]
+pub struct DaggerServerArgs {
+    /// The learner's (or a router's) endpoint, e.g. tcp/10.0.0.5:7447.
+    #[arg(long, required = true, value_parser = endpoint)]
+    connect: Vec<String>,
+    /// The student run whose teachers label its states.
+    #[arg(long, default_value = "student")]
+    run_id: String,
+    /// A Zenoh JSON5 configuration (TLS, authentication); explicit endpoints override its own.
+    #[arg(long)]
+    zenoh_config: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -344,37 +368,39 @@ pub(crate) fn train_locally(
     let run_id = config.run_id.clone();
     let scenes = config.scenes.clone();
     let result = run_with_progress(&config, &endpoints, demo, || {
+        // The student's labels come from a dagger-server; the teachers' runs need none.
+        let mut processes: Vec<(String, Vec<String>)> = Vec::new();
+        if role == "student" {
+            processes.push((
+                "dagger-server".into(),
+                ["dagger-server", "--connect", &endpoint, "--run-id", &run_id]
+                    .map(String::from)
+                    .to_vec(),
+            ));
+        }
         for i in 0..actors {
-            let log = run_dir.join(format!("actor-{i}.log"));
-            // Appended, not truncated: a resumed run keeps the logs of its earlier sessions.
-            let spawned = std::fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(&log)
-                .with_context(|| format!("opening {}", log.display()))
-                .and_then(|file| {
-                    let err = file.try_clone()?;
-                    let mut cmd = Command::new(&exe);
-                    die_with_parent(&mut cmd);
-                    cmd.args(["actor", "--connect", &endpoint, "--run-id", &run_id])
-                        .args(["--role", &role, "--envs", &args.envs.to_string()])
-                        .args(["--seed", &(1000 + i as u64).to_string()])
-                        .args(["--actor-id", &format!("local-{i}")])
-                        .args(
-                            scenes
-                                .iter()
-                                .flat_map(|d| [std::ffi::OsStr::new("--scenes"), d.as_os_str()]),
-                        )
-                        .stdin(Stdio::null())
-                        .stdout(file)
-                        .stderr(err)
-                        .spawn()
-                        .context("starting an actor process")
-                });
-            match spawned {
+            let mut a: Vec<String> = ["actor", "--connect", &endpoint, "--run-id", &run_id]
+                .map(String::from)
+                .to_vec();
+            a.extend([
+                "--role".into(),
+                role.clone(),
+                "--envs".into(),
+                args.envs.to_string(),
+            ]);
+            a.extend(["--seed".into(), (1000 + i as u64).to_string()]);
+            a.extend(["--actor-id".into(), format!("local-{i}")]);
+            processes.push((format!("actor-{i}"), a));
+        }
+        for (name, mut process_args) in processes {
+            if let (true, Some(d)) = (name.starts_with("actor"), &scenes) {
+                process_args.extend(["--scenes".into(), d.display().to_string()]);
+            }
+            let log = run_dir.join(format!("{name}.log"));
+            match spawn_logged(&exe, &process_args, &log) {
                 Ok(child) => children.push(child),
                 Err(e) => {
-                    spawn_error = Some(e);
+                    spawn_error = Some(e.context(format!("starting the {name} process")));
                     shutdown::request();
                     break;
                 }
@@ -386,6 +412,25 @@ pub(crate) fn train_locally(
         return Err(e);
     }
     result
+}
+
+/// Starts `exe args` with stdout and stderr appended to `log` (not truncated: a resumed run keeps
+/// the logs of its earlier sessions), dying with this process.
+fn spawn_logged(exe: &std::path::Path, args: &[String], log: &std::path::Path) -> Result<Child> {
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(log)
+        .with_context(|| format!("opening {}", log.display()))?;
+    let err = file.try_clone()?;
+    let mut cmd = Command::new(exe);
+    die_with_parent(&mut cmd);
+    Ok(cmd
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(file)
+        .stderr(err)
+        .spawn()?)
 }
 
 /// The child gets SIGTERM (its clean stop) when this process dies, however it dies, SIGKILL
@@ -451,6 +496,19 @@ pub fn learner(args: LearnerArgs) -> Result<()> {
         zenoh_config: args.learner.zenoh_config.clone(),
     };
     run_with_progress(&config, &endpoints, demo, || {})
+}
+
+/// `lhm dagger-server`: the teacher-label service of a student run (the same as the
+/// `lhm-dagger-server` binary), here so that `lhm train --stage student` can start it.
+pub fn dagger_server(args: DaggerServerArgs) -> Result<()> {
+    shutdown::install();
+    let endpoints = Endpoints {
+        listen: vec![],
+        connect: args.connect,
+        zenoh_config: args.zenoh_config,
+    };
+    lhm_dagger_server::serve(&endpoints, &args.run_id).context("dagger-server")?;
+    Ok(())
 }
 
 pub fn actor(args: ActorArgs) -> Result<()> {

@@ -39,6 +39,9 @@ enum Command {
     Learner(cluster_cmd::LearnerArgs),
     /// One actor process: simulates episodes and streams trajectories to a learner.
     Actor(cluster_cmd::ActorArgs),
+    /// The teacher-label service of a student run: labels student states with Teacher 1 (first
+    /// cycle) or Teacher 2 (later cycles).
+    DaggerServer(cluster_cmd::DaggerServerArgs),
     /// The benchmark: generate, validate, summarise and draw its tasks.
     Scenes(scenes_cmd::ScenesArgs),
     /// Record one episode of a trained policy as MCAP (opens in Foxglove).
@@ -113,6 +116,7 @@ fn main() -> ExitCode {
         }),
         Command::Learner(args) => cluster_cmd::learner(args).map(|()| ExitCode::SUCCESS),
         Command::Actor(args) => cluster_cmd::actor(args).map(|()| ExitCode::SUCCESS),
+        Command::DaggerServer(args) => cluster_cmd::dagger_server(args).map(|()| ExitCode::SUCCESS),
         Command::Record(args) => record_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Eval(args) => eval_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Recover(args) => record_cmd::recover(args).map(|()| ExitCode::SUCCESS),

@@ -1,4 +1,5 @@
-//! `lhm pipeline`: the paper's stages in order — `t1` → `t1-rr` → `t2` → eval — each a run of the
+//! `lhm pipeline`: the paper's stages in order — `t1` → `t1-rr` → `t2` → `student` → eval — each
+//! a run of the
 //! same local actor–learner cluster as `lhm train` (`Stage` presets its configuration), in
 //! `<runs dir>/<pipeline>/<stage>/`. A stage whose status says it reached its budget is skipped
 //! and an unfinished one resumes from its checkpoint, so running the command again continues
@@ -36,13 +37,13 @@ pub struct PipelineArgs {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StageConfig {
-    /// `t1`, `t1-rr` or `t2`.
+    /// `t1`, `t1-rr`, `t2` or `student`.
     pub stage: String,
     /// The stage's training configuration (a `lhm train --config` file, relative to the
     /// pipeline file); absent: the built-in default.
     #[serde(default)]
     pub config: Option<PathBuf>,
-    /// The stage's budget: PPO iterations in all.
+    /// The stage's budget: iterations in all (PPO updates; the student's DAgger rounds).
     pub iterations: u64,
 }
 
@@ -81,8 +82,8 @@ pub struct PipelineConfig {
 }
 
 impl Default for PipelineConfig {
-    /// The laptop pipeline: ~1 h of Teacher 1, 15 min each of fine-tuning and Teacher 2 at the
-    /// 2-core loop's ~1,400 samples/s (4,096-sample iterations).
+    /// The laptop pipeline: ~1 h of Teacher 1, 15 min each of fine-tuning, Teacher 2 and the
+    /// student at the 2-core loop's ~1,400 samples/s (4,096-sample iterations).
     fn default() -> Self {
         let stage = |stage: &str, iterations| StageConfig {
             stage: stage.into(),
@@ -93,7 +94,12 @@ impl Default for PipelineConfig {
             name: "pipeline".into(),
             actors: None,
             envs: 16,
-            stages: vec![stage("t1", 1200), stage("t1-rr", 300), stage("t2", 300)],
+            stages: vec![
+                stage("t1", 1200),
+                stage("t1-rr", 300),
+                stage("t2", 300),
+                stage("student", 300),
+            ],
             eval: EvalConfig::default(),
         }
     }
@@ -148,8 +154,10 @@ impl PipelineConfig {
             let needs = match stage {
                 Stage::T1 => None,
                 Stage::T1Rr => (!seen.contains(&Stage::T1)).then_some("a t1 stage before it"),
-                Stage::T2 => (!seen.iter().any(|s| *s != Stage::T2))
+                Stage::T2 => (!seen.iter().any(|s| matches!(s, Stage::T1 | Stage::T1Rr)))
                     .then_some("a Teacher 1 stage (t1 or t1-rr) before it"),
+                Stage::Student => (!seen.contains(&Stage::T2))
+                    .then_some("a t2 stage (and a Teacher 1 stage) before it"),
             };
             if let Some(what) = needs {
                 bail!("stage {} ({}) needs {what}", i + 1, s.stage);
@@ -200,6 +208,7 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
     // The Teacher 1 policy later stages start from: t1's, then t1-rr's once that has run.
     let mut teacher1: Option<PathBuf> = None;
     let mut teacher2: Option<PathBuf> = None;
+    let mut student: Option<PathBuf> = None;
     let mut upstream_trained = false;
     for (spec, stage) in config.stages.iter().zip(&stages) {
         let mut train = match &spec.config {
@@ -212,7 +221,12 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
         if args.scenes.scenes.is_some() {
             train.scenes.clone_from(&args.scenes.scenes);
         }
-        stage.apply(&mut train, teacher1.as_deref())?;
+        let labeller2 = if *stage == Stage::Student {
+            teacher2.as_deref()
+        } else {
+            None
+        };
+        stage.apply(&mut train, teacher1.as_deref(), labeller2)?;
         train.check()?;
         let dir = train.run_dir();
         let done = iterations_done(&dir)?;
@@ -263,14 +277,20 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
         }
         crate::plot_cmd::plot_run(&dir)
             .with_context(|| format!("stage {}: curves", stage.name()))?;
-        if *stage == Stage::T2 {
-            teacher2 = Some(dir.join("policy"));
-        } else {
-            teacher1 = Some(dir.join("policy"));
+        let policy = Some(dir.join("policy"));
+        match stage {
+            Stage::T1 | Stage::T1Rr => teacher1 = policy,
+            Stage::T2 => teacher2 = policy,
+            Stage::Student => student = policy,
         }
     }
     if let Some(t1) = &teacher1 {
-        evaluate(&config, &root, t1, teacher2.as_deref(), &args.scenes)?;
+        let policies = Policies {
+            teacher1: t1,
+            teacher2: teacher2.as_deref(),
+            student: student.as_deref(),
+        };
+        evaluate(&config, &root, &policies, &args.scenes)?;
     }
     if shutdown::requested() {
         println!(
@@ -288,23 +308,35 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
     Ok(true)
 }
 
+/// The policies the pipeline's stages left.
+struct Policies<'a> {
+    teacher1: &'a Path,
+    teacher2: Option<&'a Path>,
+    student: Option<&'a Path>,
+}
+
 /// `lhm eval` on each split: the last Teacher 1 policy on the tasks' first pairs into
-/// `<pipeline>/eval/<split>/t1-first-pair/`, and with a Teacher 2, the paper's "T" row (Teacher
-/// 1 on the first cycle, Teacher 2 on the later ones) on whole tasks into `.../teachers/`. An
-/// evaluation whose table is already there is skipped.
+/// `<pipeline>/eval/<split>/t1-first-pair/`; with a Teacher 2, the paper's "T" row (Teacher 1 on
+/// the first cycle, Teacher 2 on the later ones) on whole tasks into `.../teachers/`; with a
+/// student, its "S" row (the one policy through every cycle) into `.../student/`. An evaluation
+/// whose table is already there is skipped.
 fn evaluate(
     config: &PipelineConfig,
     root: &Path,
-    teacher1: &Path,
-    teacher2: Option<&Path>,
+    policies: &Policies<'_>,
     scenes: &crate::scenes_cmd::Source,
 ) -> Result<()> {
+    let teacher1 = policies.teacher1;
     for split in &config.eval.splits {
-        let mut rows = vec![("t1-first-pair", teacher1, None)];
-        if let Some(t2) = teacher2 {
-            rows.push(("teachers", t2, Some(teacher1.to_path_buf())));
+        // (row, policy, Teacher 1 for the first cycle, first pair only)
+        let mut rows = vec![("t1-first-pair", teacher1, None, true)];
+        if let Some(t2) = policies.teacher2 {
+            rows.push(("teachers", t2, Some(teacher1.to_path_buf()), false));
         }
-        for (row, policy, first) in rows {
+        if let Some(s) = policies.student {
+            rows.push(("student", s, None, false));
+        }
+        for (row, policy, first, first_pair) in rows {
             let out = root.join("eval").join(split).join(row);
             if out.join("table.json").is_file() {
                 println!("eval {split} {row}: finished, table in {}", out.display());
@@ -318,7 +350,7 @@ fn evaluate(
                 policy: policy.to_path_buf(),
                 split: split.clone(),
                 seeds: config.eval.seeds,
-                first_pair: first.is_none(),
+                first_pair,
                 teacher1: first,
                 limit: config.eval.limit,
                 config: None,
@@ -347,15 +379,21 @@ mod tests {
     fn the_default_pipeline_and_a_smoke_file_are_valid() {
         assert_eq!(
             PipelineConfig::default().check().unwrap(),
-            vec![Stage::T1, Stage::T1Rr, Stage::T2]
+            vec![Stage::T1, Stage::T1Rr, Stage::T2, Stage::Student]
         );
         let smoke = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/pipeline-smoke.toml");
         let c = PipelineConfig::from_toml_file(&smoke).unwrap();
-        assert_eq!(c.stages.len(), 3);
+        assert_eq!(c.stages.len(), 4);
         assert!(c
             .stages
             .iter()
             .all(|s| s.config.as_ref().is_some_and(|p| p.is_file())));
+        let hour = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/pipeline-hour.toml");
+        let c = PipelineConfig::from_toml_file(&hour).unwrap();
+        assert_eq!(
+            c.check().unwrap(),
+            vec![Stage::T1, Stage::T1Rr, Stage::T2, Stage::Student]
+        );
     }
 
     #[test]
@@ -369,8 +407,8 @@ mod tests {
         assert!(e.contains("at least 1"), "{e}");
         let e = err("[[stage]]\nstage = \"t1\"\niterations = 1\n[[stage]]\nstage = \"t1\"\niterations = 1\n");
         assert!(e.contains("twice"), "{e}");
-        let e = err("[[stage]]\nstage = \"student\"\niterations = 1\n");
-        assert!(e.contains("not built yet"), "{e}");
+        let e = err("[[stage]]\nstage = \"t1\"\niterations = 1\n[[stage]]\nstage = \"student\"\niterations = 1\n");
+        assert!(e.contains("needs a t2 stage"), "{e}");
         assert!(toml::from_str::<PipelineConfig>("stages = 3").is_err());
         // t1 then t2 (no fine-tuning) is a valid pipeline.
         assert_eq!(

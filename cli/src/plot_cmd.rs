@@ -24,7 +24,8 @@ pub struct PlotArgs {
 }
 
 /// The metrics drawn, in panel order: (column in metrics.csv, panel title). Other columns are
-/// ignored; one of these that the file lacks gets no panel.
+/// ignored; one of these that the file lacks, or holds no value in (a student's discriminator, a
+/// teacher's regression loss), gets no panel.
 const PANELS: &[(&str, &str)] = &[
     ("mean_return", "return"),
     ("mean_episode_length", "episode length (steps)"),
@@ -35,6 +36,8 @@ const PANELS: &[(&str, &str)] = &[
     ("task_reward", "task reward"),
     ("samples_per_s", "samples/s"),
     ("success_rate", "success rate"),
+    ("student_loss", "student regression loss (MSE)"),
+    ("teacher_mix", "DAgger teacher mix (beta)"),
 ];
 
 /// The x axis column; without it the row index is used.
@@ -51,6 +54,8 @@ const COLOURS: &[RGBColor] = &[
     RGBColor(227, 119, 194),
     RGBColor(23, 190, 207),
     RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(0, 0, 128),
 ];
 
 pub fn run(args: PlotArgs) -> Result<()> {
@@ -315,6 +320,7 @@ fn plot(metrics: &Metrics, source: &str, output: &Path, size: (u32, u32)) -> Res
     let panels: Vec<(&str, &[f64])> = PANELS
         .iter()
         .filter_map(|&(name, title)| metrics.column(name).map(|v| (title, v)))
+        .filter(|(_, v)| v.iter().any(|x| x.is_finite()))
         .collect();
     if panels.is_empty() {
         let known: Vec<&str> = PANELS.iter().map(|(n, _)| *n).collect();

@@ -63,4 +63,9 @@ pub struct RunSpec {
     /// on shared cores and no chunk goes stale; 0: actors run free.
     #[serde(default)]
     pub chunk_sets_per_version: u32,
+    /// DAgger's β for a student rollout: the probability that a step executes the teachers'
+    /// action instead of the student's (the label is sent either way). The learner lowers it
+    /// round by round; other roles ignore it.
+    #[serde(default)]
+    pub teacher_mix: f32,
 }

@@ -117,6 +117,7 @@ mod tests {
             chunk_steps: 16,
             record_every_episodes: 0,
             chunk_sets_per_version: 0,
+            teacher_mix: 0.0,
         }
     }
 

@@ -74,6 +74,7 @@ fn python_recomputes_the_chunks_log_probs_and_values_from_the_published_weights(
         chunk_steps: n as u32,
         record_every_episodes: 0,
         chunk_sets_per_version: 0,
+        teacher_mix: 0.0,
     };
     let weights = encode_policy("py-check", Role::Teacher1, 42, &spec, &ac)
         .unwrap()

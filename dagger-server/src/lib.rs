@@ -1,14 +1,18 @@
 //! The teacher-label service. Student rollouts send batches of states with their episode stage;
 //! the finite-state machine of the paper picks the supervising teacher per state (first cycle →
 //! Teacher 1, later cycles → Teacher 2) and the reply carries that teacher's mean action.
-//! Teachers are the learners' latest published weights (`policy/teacher1`, `policy/teacher2`),
-//! kept current by subscription; each teacher labels its rows of a request in one batched
-//! forward pass. DAgger aggregation itself comes with the student pipeline.
+//! Teachers are the weights published on the run's `policy/teacher1` and `policy/teacher2` keys (a
+//! student learner serves its two frozen teachers there), kept current by subscription; each
+//! teacher labels its rows of a request in one batched forward pass. The server keeps no state:
+//! the student's learner aggregates the labelled rows (`lhm_learner::dagger`).
 
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
-use lhm_cluster::{decode_policy, ReceivedPolicy};
-use lhm_protos::{LabelReply, LabelRequest, Role, Stage, WireMessage};
+use lhm_cluster::session::open_session_retrying;
+use lhm_cluster::{decode_policy, shutdown, ClusterError, Endpoints, NodeMode, ReceivedPolicy};
+use lhm_protos::{keys, LabelReply, LabelRequest, Role, Stage, WireMessage};
+use zenoh::Wait;
 
 /// The teachers currently loaded.
 #[derive(Default, Clone)]
@@ -183,3 +187,91 @@ pub fn bench_labels(
 
 /// Shared, updatable teachers for the queryable callback.
 pub type SharedTeachers = Arc<Mutex<Teachers>>;
+
+fn zerr(e: impl std::fmt::Display) -> ClusterError {
+    ClusterError::zenoh(e)
+}
+
+/// Serves `lhm/<run_id>/dagger/label` until SIGTERM/Ctrl-C: connects (waiting for the learner),
+/// keeps both teachers' latest weights by subscription (and asks for them once at start), and
+/// answers each label query with [`answer`]. A stop while still waiting for the learner is a
+/// clean stop.
+pub fn serve(endpoints: &Endpoints, run_id: &str) -> Result<(), ClusterError> {
+    keys::check_chunk("run id", run_id)?;
+    let session = match open_session_retrying(
+        NodeMode::Client,
+        endpoints,
+        Duration::from_millis(500),
+        || !shutdown::requested(),
+    ) {
+        Ok(s) => s,
+        Err(e @ ClusterError::Stopped(_)) => {
+            tracing::info!("{e}");
+            return Ok(());
+        }
+        Err(e) => return Err(e),
+    };
+    let teachers = SharedTeachers::default();
+    let mut subscribers = Vec::new();
+    for role in [Role::Teacher1, Role::Teacher2] {
+        let t = teachers.clone();
+        let key = keys::policy(run_id, role);
+        subscribers.push(
+            session
+                .declare_subscriber(&key)
+                .callback(move |sample| {
+                    let bytes = sample.payload().to_bytes();
+                    match t.lock().map(|mut t| t.update(&bytes)) {
+                        Ok(Ok(role)) => tracing::debug!("new {} weights", keys::role_chunk(role)),
+                        Ok(Err(e)) => tracing::warn!("ignoring weights: {e}"),
+                        Err(_) => {}
+                    }
+                })
+                .wait()
+                .map_err(zerr)?,
+        );
+        // The latest weights now, rather than at the learner's next update.
+        if let Ok(replies) = session.get(&key).timeout(Duration::from_secs(2)).wait() {
+            while let Ok(reply) = replies.recv() {
+                if let (Ok(sample), Ok(mut t)) = (reply.result(), teachers.lock()) {
+                    let _ = t.update(&sample.payload().to_bytes());
+                }
+            }
+        }
+    }
+    let t = teachers.clone();
+    let label_key = keys::dagger_label(run_id);
+    let _queryable = session
+        .declare_queryable(&label_key)
+        .callback(move |query| {
+            let bytes = query
+                .payload()
+                .map(|p| p.to_bytes().to_vec())
+                .unwrap_or_default();
+            let snapshot = t.lock().map(|t| t.clone()).unwrap_or_default();
+            let reply = answer(&bytes, &snapshot);
+            match reply.encode_checked() {
+                Ok(bytes) => {
+                    // A reply travels with the query's QoS: students query with Block and a high
+                    // priority so labels are never dropped.
+                    if let Err(e) = query.reply(query.key_expr().clone(), bytes).wait() {
+                        tracing::warn!("replying to a label query: {e}");
+                    }
+                }
+                Err(e) => tracing::warn!("label reply does not encode: {e}"),
+            }
+        })
+        .wait()
+        .map_err(zerr)?;
+    let _token = session
+        .liveliness()
+        .declare_token(keys::status(run_id, "dagger-server"))
+        .wait()
+        .map_err(zerr)?;
+    tracing::info!("dagger-server answering {label_key}");
+    while !shutdown::requested() {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    drop(subscribers);
+    session.close().wait().map_err(zerr)
+}

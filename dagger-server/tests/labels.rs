@@ -18,6 +18,7 @@ fn spec() -> RunSpec {
         chunk_steps: 8,
         record_every_episodes: 0,
         chunk_sets_per_version: 0,
+        teacher_mix: 0.0,
     }
 }
 

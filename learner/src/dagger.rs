@@ -229,6 +229,63 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> LearnerError + '_ {
     }
 }
 
+/// A DAgger run's settings: the mixing rate β and its schedule, the dataset's bound, the
+/// regression.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DaggerConfig {
+    /// β of the first round: the probability that a step executes the teachers' action instead
+    /// of the student's (Ross et al. 2011 start from the expert alone, β = 1).
+    pub teacher_mix: f32,
+    /// β is multiplied by this after every round (β_k = teacher_mix · decay^k).
+    pub teacher_mix_decay: f32,
+    /// Rows the aggregated dataset keeps; past it the oldest rounds are dropped.
+    pub capacity: usize,
+    pub regression: StudentConfig,
+}
+
+impl Default for DaggerConfig {
+    fn default() -> Self {
+        Self {
+            teacher_mix: 1.0,
+            // β below 0.1 after 45 rounds: the student drives most steps well inside a
+            // laptop-sized stage of a few hundred rounds.
+            teacher_mix_decay: 0.95,
+            // ~330 floats a row: 100k rows are ~130 MB on disk and in memory.
+            capacity: 100_000,
+            regression: StudentConfig::default(),
+        }
+    }
+}
+
+impl DaggerConfig {
+    /// β for the rollouts of round `round` (0-based).
+    pub fn teacher_mix_at(&self, round: u64) -> f32 {
+        let k = i32::try_from(round).unwrap_or(i32::MAX);
+        (self.teacher_mix * self.teacher_mix_decay.powi(k)).clamp(0.0, 1.0)
+    }
+
+    pub fn check(&self) -> Result<(), String> {
+        if !(0.0..=1.0).contains(&self.teacher_mix)
+            || !(0.0..=1.0).contains(&self.teacher_mix_decay)
+        {
+            return Err(format!(
+                "dagger.teacher_mix ({}) and dagger.teacher_mix_decay ({}) must lie in [0, 1]",
+                self.teacher_mix, self.teacher_mix_decay
+            ));
+        }
+        if self.capacity == 0 || self.regression.epochs == 0 || self.regression.minibatch_size == 0
+        {
+            return Err(
+                "dagger.capacity, dagger.regression.epochs and dagger.regression.minibatch_size \
+                 must be at least 1"
+                    .into(),
+            );
+        }
+        Ok(())
+    }
+}
+
 /// Settings of the student's regression.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

@@ -136,13 +136,21 @@ fn scenes_dir_is_read_or_refused_by_name() {
 
 #[test]
 fn bad_stages_pipelines_and_demo_starts_are_refused_by_name() {
-    // A stage that needs a Teacher 1, one that is not built, t1 given a Teacher 1.
+    // Stages that need teachers, t1 given a Teacher 1, a Teacher 2 outside the student stage.
     for (args, expected) in [
         (vec!["train", "--no-amp", "--stage", "t1-rr"], "--init-from"),
         (vec!["train", "--no-amp", "--stage", "t2"], "--teacher1"),
         (
             vec!["train", "--no-amp", "--stage", "student"],
-            "not built yet",
+            "--teacher1",
+        ),
+        (
+            vec!["train", "--stage", "student", "--teacher1", "x/policy"],
+            "--teacher2",
+        ),
+        (
+            vec!["train", "--no-amp", "--teacher2", "x/policy"],
+            "--stage student",
         ),
         (
             vec![

@@ -1,6 +1,7 @@
 //! `lhm pipeline` end to end on loopback with the repository's smoke configuration: every stage
-//! runs in order, a SIGKILL in the middle loses nothing finished, and running the same command
-//! again completes the pipeline without redoing a finished stage.
+//! (t1, t1-rr, t2, the DAgger student with its dagger-server) runs in order, a SIGKILL inside a
+//! stage (t1-rr, then the student) loses nothing finished, and running the same command again
+//! completes the pipeline without redoing a finished stage.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -28,7 +29,7 @@ fn rows(path: &Path) -> usize {
 }
 
 fn logs(dir: &Path) -> String {
-    ["first.log", "second.log"]
+    ["first.log", "second.log", "third.log"]
         .iter()
         .map(|n| {
             format!(
@@ -69,15 +70,42 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
     assert_eq!(t1_rows, 4);
     assert!(iteration(&root, "t1-rr") < 6, "killed inside t1-rr");
 
-    // The same command again: t1 skipped, t1-rr resumed, t2 and eval run.
+    // The same command again: t1 skipped, t1-rr resumed, t2 runs; killed again inside the
+    // student's stage once it has aggregated a round.
     let mut second = start_pipeline(&dir, &config, "second.log");
-    let status = second.wait_exit(Duration::from_secs(300));
+    let deadline = Instant::now() + Duration::from_secs(300);
+    while iteration(&root, "student") < 1 {
+        assert!(
+            second.is_running(),
+            "the second run ended before the student trained\n{}",
+            logs(&dir)
+        );
+        assert!(
+            Instant::now() < deadline,
+            "the student never trained\n{}",
+            logs(&dir)
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    second.signal(libc::SIGKILL);
+    second.wait_exit(Duration::from_secs(10));
+    assert!(iteration(&root, "student") < 6, "killed inside the student");
+
+    // Once more: the student resumes with its dataset, eval runs.
+    let mut third = start_pipeline(&dir, &config, "third.log");
+    let status = third.wait_exit(Duration::from_secs(300));
     assert!(
         status.is_some_and(|s| s.success()),
-        "second run: {status:?}\n{}",
+        "third run: {status:?}\n{}",
         logs(&dir)
     );
-    let log = std::fs::read_to_string(dir.join("second.log")).unwrap_or_default();
+    let third_log = std::fs::read_to_string(dir.join("third.log")).unwrap_or_default();
+    assert!(
+        third_log.contains("stage t2: finished (3 of 3 iterations)")
+            && third_log.contains("stage student: resuming to iteration 6"),
+        "{third_log}"
+    );
+    let log = std::fs::read_to_string(dir.join("second.log")).unwrap_or_default() + &third_log;
     assert!(
         log.contains("stage t1: finished (4 of 4 iterations)"),
         "{log}"
@@ -91,7 +119,7 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
         t1_rows,
         "t1 was not trained again"
     );
-    for (stage, budget) in [("t1", 4), ("t1-rr", 6), ("t2", 3)] {
+    for (stage, budget) in [("t1", 4), ("t1-rr", 6), ("t2", 3), ("student", 6)] {
         assert_eq!(iteration(&root, stage), budget, "{stage}\n{log}");
         assert!(
             root.join(stage).join("policy.json").is_file(),
@@ -112,6 +140,53 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
     let t2 = config_of("t2");
     assert!(t2.contains("role = \"teacher2\""), "{t2}");
     assert!(t2.contains("t1-rr/policy"), "t2's Teacher 1 is t1-rr: {t2}");
+    let student = config_of("student");
+    assert!(student.contains("role = \"student\""), "{student}");
+    assert!(
+        student.contains("t1-rr/policy") && student.contains("t2/policy"),
+        "the student's labellers are t1-rr and t2: {student}"
+    );
+    // The student learned from the dagger-server's labels, across the kill: the aggregated
+    // dataset grew every round (rounds made before the kill kept), each round's regression
+    // lowered its loss on the whole dataset, and the last round ends below where the first began.
+    let index: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(root.join("student/dagger/index.json")).expect("DAgger dataset index"),
+    )
+    .expect("json");
+    let shards = index
+        .get("shards")
+        .and_then(|v| v.as_array())
+        .map_or(0, Vec::len);
+    assert!(shards >= 6, "{index}");
+    let metrics = std::fs::read_to_string(root.join("student/metrics.csv")).unwrap_or_default();
+    let header: Vec<&str> = metrics
+        .lines()
+        .next()
+        .unwrap_or_default()
+        .split(',')
+        .collect();
+    let column = |name: &str| -> Vec<f64> {
+        let i = header.iter().position(|h| *h == name).expect(name);
+        metrics
+            .lines()
+            .skip(1)
+            .map(|l| {
+                l.split(',')
+                    .nth(i)
+                    .and_then(|v| v.parse().ok())
+                    .expect(name)
+            })
+            .collect()
+    };
+    let (dataset_rows, before, after) = (
+        column("dagger_rows"),
+        column("student_loss_before"),
+        column("student_loss"),
+    );
+    assert!(dataset_rows.len() >= 6, "{metrics}");
+    assert!(dataset_rows.windows(2).all(|w| w[1] > w[0]), "{metrics}");
+    assert!(before.iter().zip(&after).all(|(b, a)| a < b), "{metrics}");
+    assert!(after[after.len() - 1] < before[0], "{metrics}");
     // Eval tables on both splits with the paper's keys: Teacher 1 on first pairs, and the
     // teachers through the switch on both pairs.
     for split in ["train", "unseen"] {
@@ -122,6 +197,10 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
             ),
             (
                 "teachers",
+                &["success_1", "success_2", "dist_1", "dist_2", "success_all"][..],
+            ),
+            (
+                "student",
                 &["success_1", "success_2", "dist_1", "dist_2", "success_all"][..],
             ),
         ] {
@@ -144,11 +223,14 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
         );
     }
 
-    // A third run has nothing left to do.
-    let mut third = start_pipeline(&dir, &config, "third.log");
-    let status = third.wait_exit(Duration::from_secs(60));
-    assert!(status.is_some_and(|s| s.success()), "third run: {status:?}");
-    let log = std::fs::read_to_string(dir.join("third.log")).unwrap_or_default();
+    // A fourth run has nothing left to do.
+    let mut fourth = start_pipeline(&dir, &config, "fourth.log");
+    let status = fourth.wait_exit(Duration::from_secs(60));
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "fourth run: {status:?}"
+    );
+    let log = std::fs::read_to_string(dir.join("fourth.log")).unwrap_or_default();
     assert!(
         !log.contains("training to") && !log.contains("resuming"),
         "{log}"

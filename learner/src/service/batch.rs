@@ -55,48 +55,15 @@ pub struct Assembled {
     pub summary: EpisodeSummary,
 }
 
-pub fn assemble(
-    chunks: &[TrajectoryChunk],
-    amp: Option<&AmpTrainer>,
-    gae: GaeParams,
-) -> LearnerResult<Assembled> {
-    let mut batch = PpoBatch::default();
-    let mut amp_features = Vec::new();
+/// Episode outcomes and the mean task reward per step of `chunks` (style reward left 0).
+pub fn episode_summary(chunks: &[TrajectoryChunk]) -> EpisodeSummary {
     let mut summary = EpisodeSummary::default();
     let (mut attempted, mut succeeded) = (0u64, 0u64);
-    let (mut task_sum, mut style_sum, mut steps) = (0f64, 0f64, 0u64);
+    let (mut task_sum, mut steps) = (0f64, 0u64);
     let mut episode_steps = 0u64;
     for c in chunks {
-        let rewards = match amp {
-            Some(amp) if c.amp_dim > 0 => {
-                let style = amp.style_rewards(&c.amp_features)?;
-                style_sum += style.iter().map(|&x| x as f64).sum::<f64>();
-                amp_features.extend_from_slice(&c.amp_features);
-                amp.combine_rewards(&c.rewards, &style)?
-            }
-            _ => c.rewards.clone(),
-        };
         task_sum += c.rewards.iter().map(|&x| x as f64).sum::<f64>();
         steps += c.rewards.len() as u64;
-        let out = compute_gae(
-            &GaeInput {
-                steps: c.num_steps as usize,
-                envs: 1,
-                rewards: &rewards,
-                values: &c.values,
-                dones: &c.dones,
-                truncated: &c.truncated,
-                truncation_values: &c.truncation_values,
-                last_values: &[c.bootstrap_value],
-            },
-            gae,
-        )?;
-        batch.obs.extend_from_slice(&c.observations);
-        batch.actions.extend_from_slice(&c.actions);
-        batch.old_log_probs.extend_from_slice(&c.log_probs);
-        batch.old_values.extend_from_slice(&c.values);
-        batch.advantages.extend(out.advantages);
-        batch.returns.extend(out.returns);
         for e in &c.episodes {
             summary.episodes += 1;
             summary.mean_return += e.episode_return as f64;
@@ -132,6 +99,51 @@ pub fn assemble(
     };
     if steps > 0 {
         summary.mean_task_reward = task_sum / steps as f64;
+    }
+    summary
+}
+
+pub fn assemble(
+    chunks: &[TrajectoryChunk],
+    amp: Option<&AmpTrainer>,
+    gae: GaeParams,
+) -> LearnerResult<Assembled> {
+    let mut batch = PpoBatch::default();
+    let mut amp_features = Vec::new();
+    let mut summary = episode_summary(chunks);
+    let (mut style_sum, mut steps) = (0f64, 0u64);
+    for c in chunks {
+        let rewards = match amp {
+            Some(amp) if c.amp_dim > 0 => {
+                let style = amp.style_rewards(&c.amp_features)?;
+                style_sum += style.iter().map(|&x| x as f64).sum::<f64>();
+                amp_features.extend_from_slice(&c.amp_features);
+                amp.combine_rewards(&c.rewards, &style)?
+            }
+            _ => c.rewards.clone(),
+        };
+        steps += c.rewards.len() as u64;
+        let out = compute_gae(
+            &GaeInput {
+                steps: c.num_steps as usize,
+                envs: 1,
+                rewards: &rewards,
+                values: &c.values,
+                dones: &c.dones,
+                truncated: &c.truncated,
+                truncation_values: &c.truncation_values,
+                last_values: &[c.bootstrap_value],
+            },
+            gae,
+        )?;
+        batch.obs.extend_from_slice(&c.observations);
+        batch.actions.extend_from_slice(&c.actions);
+        batch.old_log_probs.extend_from_slice(&c.log_probs);
+        batch.old_values.extend_from_slice(&c.values);
+        batch.advantages.extend(out.advantages);
+        batch.returns.extend(out.returns);
+    }
+    if steps > 0 {
         summary.mean_style_reward = style_sum / steps as f64;
     }
     Ok(Assembled {

@@ -40,6 +40,12 @@ pub const COLUMNS: &[&str] = &[
     "reward_success",
     "reward_alive",
     "reward_imitation",
+    // The student's DAgger rounds (empty for the teachers).
+    "teacher_mix",
+    "student_loss_before",
+    "student_loss",
+    "dagger_rows",
+    "dagger_rounds",
 ];
 
 pub struct MetricsCsv {

@@ -1,10 +1,13 @@
-//! The learner service: listens, takes trajectory chunks from whoever is alive, runs PPO (+AMP)
-//! updates on on-policy batches, publishes weights (never dropped), answers `latest` queries,
-//! checkpoints every N iterations and on SIGTERM, and resumes from its checkpoint.
+//! The learner service: listens, takes trajectory chunks from whoever is alive, runs an update on
+//! each batch — PPO (+AMP) for the teachers, DAgger aggregation and regression for the student
+//! ([`optimise`]) — publishes weights (never dropped), answers `latest` queries, serves the frozen
+//! teachers a stage needs, checkpoints every N iterations and on SIGTERM, and resumes from its
+//! checkpoint.
 
 pub mod batch;
 pub mod intake;
 pub mod metrics_csv;
+pub mod optimise;
 pub mod stage;
 
 use std::collections::BTreeSet;
@@ -25,11 +28,11 @@ use zenoh::sample::SampleKind;
 use zenoh::Wait;
 
 use crate::amp::AmpConfig;
-use crate::gae::GaeParams;
 use crate::ppo::PpoConfig;
 use crate::state::{AmpSetup, Learner, LearnerConfig};
-use batch::{assemble, EpisodeSummary};
+use batch::EpisodeSummary;
 use intake::{admit, Intake, IntakeCounters};
+use optimise::Optimiser;
 
 /// Everything a training run is, as one TOML file (every field has a default).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -42,6 +45,11 @@ pub struct TrainConfig {
     /// `runs/p/t1-rr/policy`, with or without `.json`) that plays each episode's first pair.
     /// The learner loads it and serves it to the actors on the run's `teacher1` policy key.
     pub teacher1: Option<PathBuf>,
+    /// The student's runs: Teacher 2's policy checkpoint. A student run serves both teachers on
+    /// the run's `teacher1`/`teacher2` policy keys, where the dagger-server takes them.
+    pub teacher2: Option<PathBuf>,
+    /// The student's DAgger settings (β and its decay, the dataset bound, the regression).
+    pub dagger: crate::dagger::DaggerConfig,
     /// Fine-tuning (release-and-retreat after pretraining, Teacher 2 from Teacher 1): a new run
     /// starts from this checkpoint's policy, value function and normalisers (same network
     /// layout required) instead of random weights; optimiser and discriminator start fresh. A
@@ -110,6 +118,8 @@ impl Default for TrainConfig {
             run_id: "teacher1".into(),
             role: "teacher1".into(),
             teacher1: None,
+            teacher2: None,
+            dagger: crate::dagger::DaggerConfig::default(),
             init_from: None,
             scenes: None,
             runs_dir: PathBuf::from("runs"),
@@ -192,6 +202,7 @@ impl TrainConfig {
             chunk_steps: self.chunk_steps,
             record_every_episodes: self.record_every_episodes,
             chunk_sets_per_version: self.chunk_sets_per_version,
+            teacher_mix: 0.0,
         }
     }
 
@@ -208,6 +219,16 @@ impl TrainConfig {
                     "{name} must be at least 1, got 0"
                 )));
             }
+        }
+        if self.role == "student" {
+            if self.amp_enabled {
+                return Err(ServiceError::Config(
+                    "a student run learns by regression onto its teachers' actions: set \
+                     amp_enabled = false (the stage preset does)"
+                        .into(),
+                ));
+            }
+            self.dagger.check().map_err(ServiceError::Config)?;
         }
         Ok(())
     }
@@ -447,66 +468,81 @@ fn init_actor_critic(learner: &mut Learner, path: &Path) -> Result<(), ServiceEr
     Ok(())
 }
 
-/// Teacher 2's frozen Teacher 1 (`None` for other roles); a Teacher 2 run without one, or with
-/// one that does not fit this run's observations and actions, is an error naming the file.
-fn load_teacher1(config: &TrainConfig, role: Role) -> Result<Option<Learner>, ServiceError> {
-    let path = match (role, &config.teacher1) {
-        (Role::Teacher2, Some(path)) => path,
-        (Role::Teacher2, None) => {
-            return Err(ServiceError::Config(
-                "a teacher2 run needs Teacher 1's policy: `teacher1 = \"runs/<run>/policy\"` in                  the config, or --teacher1"
-                    .into(),
-            ))
-        }
-        _ => return Ok(None),
+/// The frozen teachers a run serves on its policy keys: Teacher 2's run, the Teacher 1 that
+/// plays each episode's first pair; the student's run, both teachers (the dagger-server labels
+/// with them). A run without the teachers its role needs, or with one that does not fit this
+/// run's observations and actions, is an error naming the file.
+fn load_teachers(config: &TrainConfig, role: Role) -> Result<Vec<(Role, Learner)>, ServiceError> {
+    let needed: &[(Role, &Option<PathBuf>, &str)] = match role {
+        Role::Teacher2 => &[(Role::Teacher1, &config.teacher1, "teacher1")],
+        Role::Student => &[
+            (Role::Teacher1, &config.teacher1, "teacher1"),
+            (Role::Teacher2, &config.teacher2, "teacher2"),
+        ],
+        _ => &[],
     };
-    let stem = lhm_nets::checkpoint::stem_of(path);
-    let t1 = Learner::load(&stem, None)?;
     let spec = config.run_spec();
-    let (obs, act) = (t1.actor_critic.obs_dim(), t1.actor_critic.act_dim());
-    if (obs, act) != (spec.obs_dim, spec.act_dim) {
-        return Err(ServiceError::Config(format!(
-            "{}: Teacher 1 takes {obs} observations and gives {act} actions; this run has {} and {}",
+    let mut teachers = Vec::new();
+    for (teacher, path, field) in needed {
+        let Some(path) = path else {
+            return Err(ServiceError::Config(format!(
+                "a {} run needs {}'s policy: `{field} = \"runs/<run>/policy\"` in the config, \
+                 or --{field}",
+                config.role,
+                lhm_protos::keys::role_chunk(*teacher)
+            )));
+        };
+        let stem = lhm_nets::checkpoint::stem_of(path);
+        let t = Learner::load(&stem, None)?;
+        let (obs, act) = (t.actor_critic.obs_dim(), t.actor_critic.act_dim());
+        if (obs, act) != (spec.obs_dim, spec.act_dim) {
+            return Err(ServiceError::Config(format!(
+                "{}: {field} takes {obs} observations and gives {act} actions; this run has {} and {}",
+                stem.display(),
+                spec.obs_dim,
+                spec.act_dim
+            )));
+        }
+        tracing::info!(
+            "{field}: {} (iteration {})",
             stem.display(),
-            spec.obs_dim,
-            spec.act_dim
-        )));
+            t.counters.iteration
+        );
+        teachers.push((*teacher, t));
     }
-    tracing::info!(
-        "Teacher 1 for the first pairs: {} (iteration {})",
-        stem.display(),
-        t1.counters.iteration
-    );
-    Ok(Some(t1))
+    Ok(teachers)
 }
 
-/// Answers queries on the run's `teacher1` policy key with `t1`'s weights (fixed: it is not
-/// trained here).
-fn serve_teacher1(
+/// Answers queries on the run's `role` policy key with the frozen `teacher`'s weights, and puts
+/// them once for subscribers already listening.
+fn serve_teacher(
     session: &zenoh::Session,
     config: &TrainConfig,
     spec: &RunSpec,
-    t1: &Learner,
+    role: Role,
+    teacher: &Learner,
 ) -> Result<zenoh::query::Queryable<()>, ServiceError> {
-    // Teacher 1's own network settings (its sizes or noise may differ from Teacher 2's).
-    let t1_spec = RunSpec {
-        actor_critic: t1.actor_critic.config.clone(),
+    // The teacher's own network settings (its sizes or noise may differ from this run's).
+    let teacher_spec = RunSpec {
+        actor_critic: teacher.actor_critic.config.clone(),
         ..spec.clone()
     };
     let bytes = encode_policy(
         &config.run_id,
-        Role::Teacher1,
-        t1.counters.iteration,
-        &t1_spec,
-        &t1.actor_critic,
+        role,
+        teacher.counters.iteration,
+        &teacher_spec,
+        &teacher.actor_critic,
     )?
     .encode_checked()
     .map_err(lhm_cluster::ClusterError::from)?;
+    let key = keys::policy(&config.run_id, role);
+    session.put(&key, bytes.clone()).wait().map_err(zerr)?;
     session
-        .declare_queryable(keys::policy(&config.run_id, Role::Teacher1))
+        .declare_queryable(key)
         .callback(move |query| {
             if let Err(e) = query.reply(query.key_expr().clone(), bytes.clone()).wait() {
-                tracing::warn!("answering a Teacher 1 weights query: {e}");
+                tracing::warn!("answering a teacher weights query: {e}");
             }
         })
         .wait()
@@ -621,13 +657,13 @@ pub struct Hooks<'a> {
 pub fn run_learner(
     config: &TrainConfig,
     endpoints: &Endpoints,
-    mut demo: Option<Box<dyn DemoSource>>,
+    demo: Option<Box<dyn DemoSource>>,
     mut hooks: Hooks<'_>,
 ) -> Result<LearnerStatus, ServiceError> {
     let role = config.role()?;
     config.check()?;
     keys::check_chunk("run id", &config.run_id).map_err(lhm_cluster::ClusterError::from)?;
-    let teacher1 = load_teacher1(config, role)?;
+    let teachers = load_teachers(config, role)?;
     if config.amp_enabled && demo.is_none() {
         return Err(ServiceError::Config(
             "AMP is on but no demo motion was given (install clips with scripts/install-motions, \
@@ -659,27 +695,32 @@ pub fn run_learner(
         }
         (fresh, None)
     };
-    let spec = config.run_spec();
+    let mut optimiser = match role {
+        Role::Student => Optimiser::dagger(&config.dagger, &learner, &run_dir)?,
+        _ => Optimiser::PpoAmp { demo },
+    };
+    let mut spec = config.run_spec();
+    spec.teacher_mix = optimiser.teacher_mix(learner.counters.iteration);
 
     let session = lhm_cluster::open_session(NodeMode::Router, endpoints)?;
-    let _teacher1_queryable = match &teacher1 {
-        Some(t1) => Some(serve_teacher1(&session, config, &spec, t1)?),
-        None => None,
-    };
+    let _teacher_queryables = teachers
+        .iter()
+        .map(|(role, t)| serve_teacher(&session, config, &spec, *role, t))
+        .collect::<Result<Vec<_>, _>>()?;
     let policy_key = keys::policy(&config.run_id, role);
-    let encode = |learner: &Learner| -> Result<Vec<u8>, ServiceError> {
+    let encode = |learner: &Learner, spec: &RunSpec| -> Result<Vec<u8>, ServiceError> {
         let msg = encode_policy(
             &config.run_id,
             role,
             learner.counters.iteration,
-            &spec,
+            spec,
             &learner.actor_critic,
         )?;
         Ok(msg
             .encode_checked()
             .map_err(lhm_cluster::ClusterError::from)?)
     };
-    let latest = Arc::new(Mutex::new(encode(&learner)?));
+    let latest = Arc::new(Mutex::new(encode(&learner, &spec)?));
     let latest_for_queries = Arc::clone(&latest);
     let _queryable = session
         .declare_queryable(&policy_key)
@@ -837,32 +878,18 @@ pub fn run_learner(
         let update_started = Instant::now();
         let chunks = std::mem::take(&mut pending);
         let n_steps = std::mem::take(&mut pending_steps);
-        let gae = GaeParams {
-            gamma: learner.config.ppo.gamma,
-            lambda: learner.config.ppo.lambda,
-        };
-        let assembled = assemble(&chunks, learner.amp.as_ref(), gae)?;
         if let Some(first) = chunks.first() {
             // One raw chunk per iteration: enough to inspect what actors send, small enough to keep.
             recording.with("a trajectory chunk", |r| {
                 r.write_wire("/lhm/trajectory", lhm_cluster::clock::unix_ns(), first)
             });
         }
-        let ppo_stats = learner
-            .ppo
-            .update(&mut learner.actor_critic, &assembled.batch)?;
-        let amp_stats = match (learner.amp.as_mut(), demo.as_mut()) {
-            (Some(amp), Some(demo)) if !assembled.amp_features.is_empty() => {
-                let rows = assembled.amp_features.len() / amp.feature_dim();
-                let demo_rows = demo.sample(rows);
-                Some(amp.update(&assembled.amp_features, &demo_rows)?)
-            }
-            _ => None,
-        };
+        let update = optimiser.update(&mut learner, &chunks)?;
         learner.counters.iteration += 1;
+        spec.teacher_mix = optimiser.teacher_mix(learner.counters.iteration);
         learner.counters.samples += n_steps as u64;
         book.steps_used += n_steps as u64;
-        let bytes = encode(&learner)?;
+        let bytes = encode(&learner, &spec)?;
         if let Ok(mut l) = latest.lock() {
             *l = bytes.clone();
         }
@@ -877,7 +904,7 @@ pub fn run_learner(
         }
         let update_s = update_started.elapsed().as_secs_f64();
         let total_s = collect_s + update_s;
-        let s = &assembled.summary;
+        let s = &update.summary;
         let report = IterationReport {
             iteration: it,
             samples: learner.counters.samples,
@@ -887,7 +914,7 @@ pub fn run_learner(
             episodes: s.episodes,
             actors_alive: book.actors_alive().len(),
             update_s,
-            disc_accuracy: amp_stats.as_ref().map(|a| a.accuracy()),
+            disc_accuracy: update.disc_accuracy,
             style_reward: s.mean_style_reward,
             task_reward: s.mean_task_reward,
             fall_fraction: s.fall_fraction(),
@@ -915,14 +942,12 @@ pub fn run_learner(
                 ("disc_accuracy", report.disc_accuracy.unwrap_or(f64::NAN)),
                 ("style_reward", s.mean_style_reward),
                 ("task_reward", s.mean_task_reward),
-                ("policy_loss", ppo_stats.policy_loss),
-                ("value_loss", ppo_stats.value_loss),
-                ("approx_kl", ppo_stats.approx_kl),
-                ("lr", ppo_stats.lr),
-                ("clip_fraction", ppo_stats.clip_fraction),
+            ];
+            row.extend(update.metrics.iter().map(|m| (m.column, m.value)));
+            row.extend([
                 ("stale_chunks", book.counters.stale as f64),
                 ("accepted_chunks", book.counters.accepted as f64),
-            ];
+            ]);
             row.extend(terms.iter().map(|(k, v)| (k.as_str(), *v)));
             if let Err(e) = csv.append(&row) {
                 tracing::warn!("writing {}: {e}; metrics.csv stops", csv.path().display());
@@ -950,13 +975,11 @@ pub fn run_learner(
         v.insert("reach_rate".into(), report.reach_rate);
         v.insert("mean_task_reward".into(), s.mean_task_reward);
         v.insert("mean_style_reward".into(), s.mean_style_reward);
-        v.insert("ppo/policy_loss".into(), ppo_stats.policy_loss);
-        v.insert("ppo/value_loss".into(), ppo_stats.value_loss);
-        v.insert("ppo/approx_kl".into(), ppo_stats.approx_kl);
-        v.insert("ppo/lr".into(), ppo_stats.lr);
-        v.insert("ppo/clip_fraction".into(), ppo_stats.clip_fraction);
-        if let Some(a) = &amp_stats {
-            v.insert("amp/accuracy".into(), a.accuracy());
+        for m in &update.metrics {
+            v.insert(m.key.into(), m.value);
+        }
+        if let Some(a) = update.disc_accuracy {
+            v.insert("amp/accuracy".into(), a);
         }
         v.insert("intake/accepted".into(), book.counters.accepted as f64);
         v.insert("intake/stale".into(), book.counters.stale as f64);
@@ -1066,19 +1089,19 @@ mod tests {
         );
     }
 
-    /// A teacher2 run names its Teacher 1; one that does not fit the run's observations is
-    /// refused naming the file; other roles need none.
+    /// A teacher2 run names its Teacher 1 and a student run both teachers; one that does not fit
+    /// the run's observations is refused naming the file; Teacher 1 runs need none.
     #[test]
-    fn teacher2_needs_a_fitting_teacher1() {
+    fn later_stages_need_fitting_teachers() {
         let mut config = TrainConfig {
             role: "teacher2".into(),
             ..TrainConfig::default()
         };
-        let err = load_teacher1(&config, Role::Teacher2).err().unwrap();
+        let err = load_teachers(&config, Role::Teacher2).err().unwrap();
         assert!(err.to_string().contains("teacher1"), "{err}");
-        assert!(load_teacher1(&TrainConfig::default(), Role::Teacher1)
+        assert!(load_teachers(&TrainConfig::default(), Role::Teacher1)
             .unwrap()
-            .is_none());
+            .is_empty());
 
         let dir = std::env::temp_dir().join(format!("lhm-teacher1-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
@@ -1095,7 +1118,7 @@ mod tests {
             .save_policy(&dir.join("wrong"))
             .unwrap();
         config.teacher1 = Some(dir.join("wrong.json"));
-        let err = load_teacher1(&config, Role::Teacher2).err().unwrap();
+        let err = load_teachers(&config, Role::Teacher2).err().unwrap();
         assert!(
             err.to_string().contains("wrong") && err.to_string().contains("observations"),
             "{err}"
@@ -1105,7 +1128,20 @@ mod tests {
             .save_policy(&dir.join("right"))
             .unwrap();
         config.teacher1 = Some(dir.join("right"));
-        assert!(load_teacher1(&config, Role::Teacher2).unwrap().is_some());
+        let teachers = load_teachers(&config, Role::Teacher2).unwrap();
+        assert_eq!(teachers.len(), 1);
+        assert_eq!(teachers[0].0, Role::Teacher1);
+
+        config.role = "student".into();
+        let err = load_teachers(&config, Role::Student).err().unwrap();
+        assert!(err.to_string().contains("teacher2"), "{err}");
+        config.teacher2 = Some(dir.join("right"));
+        let roles: Vec<Role> = load_teachers(&config, Role::Student)
+            .unwrap()
+            .into_iter()
+            .map(|(r, _)| r)
+            .collect();
+        assert_eq!(roles, vec![Role::Teacher1, Role::Teacher2]);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -1,6 +1,7 @@
 //! The paper's training stages as presets of one [`TrainConfig`]: the same actor–learner run,
-//! differing only in what the actors roll out (role, tasks, the frozen Teacher 1) and what the
-//! learner optimises (the reward weights, where the weights start).
+//! differing only in what the actors roll out (role, tasks, the frozen teachers) and what the
+//! learner optimises (the reward weights and where the weights start for PPO + AMP; regression
+//! onto the teachers' labels for the student, `super::optimise`).
 
 use super::{ServiceError, TrainConfig};
 use std::path::{Path, PathBuf};
@@ -22,38 +23,39 @@ pub enum Stage {
     /// Teacher 2 on the second pair of two-object tasks, from Teacher 1's terminal states.
     #[serde(rename = "t2")]
     T2,
+    /// The unified student, distilled from both teachers by DAgger on two-object tasks.
+    #[serde(rename = "student")]
+    Student,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 3] = [Stage::T1, Stage::T1Rr, Stage::T2];
+    pub const ALL: [Stage; 4] = [Stage::T1, Stage::T1Rr, Stage::T2, Stage::Student];
 
     pub fn name(self) -> &'static str {
         match self {
             Stage::T1 => "t1",
             Stage::T1Rr => "t1-rr",
             Stage::T2 => "t2",
+            Stage::Student => "student",
         }
     }
 
-    /// `t1`, `t1-rr` or `t2`; the student stage is named with a clear error (not built yet).
+    /// `t1`, `t1-rr`, `t2` or `student`.
     pub fn parse(text: &str) -> Result<Self, ServiceError> {
-        match text {
-            "t1" => Ok(Stage::T1),
-            "t1-rr" => Ok(Stage::T1Rr),
-            "t2" => Ok(Stage::T2),
-            "student" => Err(ServiceError::Config(
-                "stage \"student\" (DAgger distillation) is not built yet; stages are t1, t1-rr, t2"
-                    .into(),
-            )),
-            other => Err(ServiceError::Config(format!(
-                "stage {other:?} is not one of t1, t1-rr, t2"
-            ))),
-        }
+        Self::ALL
+            .into_iter()
+            .find(|s| s.name() == text)
+            .ok_or_else(|| {
+                ServiceError::Config(format!(
+                    "stage {text:?} is not one of t1, t1-rr, t2, student"
+                ))
+            })
     }
 
     /// Applies the stage to `config`. `teacher1` is the Teacher 1 policy a later stage starts
     /// from (`t1-rr`: its weights; `t2`: the frozen policy that plays each episode's first pair,
-    /// and T2's starting weights): a checkpoint stem such as `runs/p/t1/policy`.
+    /// and T2's starting weights; `student`: the first cycle's labeller) and `teacher2` Teacher
+    /// 2's (`student`: the later cycles' labeller): checkpoint stems such as `runs/p/t1/policy`.
     ///
     /// - `t1`: role teacher1, as configured (a `teacher1` is refused: t1 starts from scratch).
     /// - `t1-rr`: role teacher1, initialised from the configuration's `init_from` if it has one,
@@ -62,10 +64,14 @@ impl Stage {
     ///   is a t1 run with `init_from`).
     /// - `t2`: role teacher2 with `teacher1` frozen for the first pair, initialised from it,
     ///   on the two-object training tasks unless the configuration lists others.
+    /// - `student`: role student, both teachers frozen as labellers (the given ones win over the
+    ///   configuration's), no AMP (it learns by regression), on the two-object training tasks
+    ///   unless the configuration lists others; its weights start fresh.
     pub fn apply(
         self,
         config: &mut TrainConfig,
         teacher1: Option<&Path>,
+        teacher2: Option<&Path>,
     ) -> Result<(), ServiceError> {
         let need = |what: &str| {
             teacher1.map(Path::to_path_buf).ok_or_else(|| {
@@ -75,6 +81,12 @@ impl Stage {
                 ))
             })
         };
+        if teacher2.is_some() && self != Stage::Student {
+            return Err(ServiceError::Config(format!(
+                "stage {} takes no Teacher 2 (only the student is distilled from one)",
+                self.name()
+            )));
+        }
         match self {
             Stage::T1 => {
                 if let Some(t) = teacher1 {
@@ -114,6 +126,30 @@ impl Stage {
                     config.tasks = lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train);
                 }
             }
+            Stage::Student => {
+                let pick = |given: Option<&Path>, configured: &Option<PathBuf>, what: &str| {
+                    given
+                        .map(Path::to_path_buf)
+                        .or_else(|| configured.clone())
+                        .ok_or_else(|| {
+                            ServiceError::Config(format!(
+                                "stage student needs --{what} (a {what} checkpoint, e.g. \
+                                 runs/p/{}/policy)",
+                                if what == "teacher1" { "t1-rr" } else { "t2" }
+                            ))
+                        })
+                };
+                // Both checked before either is set: a refused stage leaves the config as it was.
+                let t1 = pick(teacher1, &config.teacher1, "teacher1")?;
+                let t2 = pick(teacher2, &config.teacher2, "teacher2")?;
+                config.teacher1 = Some(t1);
+                config.teacher2 = Some(t2);
+                config.role = "student".into();
+                config.amp_enabled = false;
+                if config.tasks == lhm_cluster::TaskSet::TrainSingleObject {
+                    config.tasks = lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train);
+                }
+            }
         }
         Ok(())
     }
@@ -127,19 +163,19 @@ mod tests {
     fn each_stage_sets_its_role_start_and_reward() {
         let mut t1 = TrainConfig::default();
         assert!(Stage::T1
-            .apply(&mut t1, Some(Path::new("x/policy")))
+            .apply(&mut t1, Some(Path::new("x/policy")), None)
             .is_err());
-        Stage::T1.apply(&mut t1, None).unwrap();
+        Stage::T1.apply(&mut t1, None, None).unwrap();
         assert_eq!(t1.role, "teacher1");
         assert_eq!(t1.env.weights.release_retreat, 0.0);
 
         let mut rr = TrainConfig::default();
         assert!(
-            Stage::T1Rr.apply(&mut rr, None).is_err(),
+            Stage::T1Rr.apply(&mut rr, None, None).is_err(),
             "t1-rr needs a Teacher 1"
         );
         Stage::T1Rr
-            .apply(&mut rr, Some(Path::new("runs/p/t1/policy")))
+            .apply(&mut rr, Some(Path::new("runs/p/t1/policy")), None)
             .unwrap();
         assert_eq!(rr.init_from.as_deref(), Some(Path::new("runs/p/t1/policy")));
         assert_eq!(
@@ -150,7 +186,7 @@ mod tests {
         let mut rr2 = TrainConfig::default();
         rr2.env.weights.release_retreat = 2.0;
         Stage::T1Rr
-            .apply(&mut rr2, Some(Path::new("a/policy")))
+            .apply(&mut rr2, Some(Path::new("a/policy")), None)
             .unwrap();
         assert_eq!(rr2.env.weights.release_retreat, 2.0);
         // An explicit init_from wins over the previous stage's policy.
@@ -159,17 +195,17 @@ mod tests {
             ..TrainConfig::default()
         };
         Stage::T1Rr
-            .apply(&mut rr3, Some(Path::new("runs/p/t1/policy")))
+            .apply(&mut rr3, Some(Path::new("runs/p/t1/policy")), None)
             .unwrap();
         assert_eq!(rr3.init_from.as_deref(), Some(Path::new("mine/policy")));
 
         let mut t2 = TrainConfig::default();
         assert!(
-            Stage::T2.apply(&mut t2, None).is_err(),
+            Stage::T2.apply(&mut t2, None, None).is_err(),
             "t2 needs a Teacher 1"
         );
         Stage::T2
-            .apply(&mut t2, Some(Path::new("runs/p/t1-rr/policy")))
+            .apply(&mut t2, Some(Path::new("runs/p/t1-rr/policy")), None)
             .unwrap();
         assert_eq!(t2.role, "teacher2");
         assert_eq!(
@@ -187,13 +223,39 @@ mod tests {
     }
 
     #[test]
-    fn stage_names_round_trip_and_the_student_is_refused_by_name() {
+    fn stage_names_round_trip_and_an_unknown_one_is_refused_by_name() {
         for s in Stage::ALL {
             assert_eq!(Stage::parse(s.name()).unwrap(), s);
         }
-        let e = Stage::parse("student").unwrap_err().to_string();
-        assert!(e.contains("not built yet"), "{e}");
         let e = Stage::parse("t3").unwrap_err().to_string();
-        assert!(e.contains("\"t3\""), "{e}");
+        assert!(e.contains("\"t3\"") && e.contains("student"), "{e}");
+    }
+
+    #[test]
+    fn the_student_needs_both_teachers_and_learns_without_amp() {
+        let (t1, t2) = (
+            Path::new("runs/p/t1-rr/policy"),
+            Path::new("runs/p/t2/policy"),
+        );
+        let mut s = TrainConfig::default();
+        let e = Stage::Student.apply(&mut s, Some(t1), None).unwrap_err();
+        assert!(e.to_string().contains("--teacher2"), "{e}");
+        let e = Stage::Student.apply(&mut s, None, Some(t2)).unwrap_err();
+        assert!(e.to_string().contains("--teacher1"), "{e}");
+        Stage::Student.apply(&mut s, Some(t1), Some(t2)).unwrap();
+        assert_eq!(s.role, "student");
+        assert!(!s.amp_enabled);
+        assert_eq!(s.teacher1.as_deref(), Some(t1));
+        assert_eq!(s.teacher2.as_deref(), Some(t2));
+        assert_eq!(
+            s.tasks,
+            lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train)
+        );
+        s.check().unwrap();
+        // Only the student takes a Teacher 2.
+        let e = Stage::T2
+            .apply(&mut TrainConfig::default(), Some(t1), Some(t2))
+            .unwrap_err();
+        assert!(e.to_string().contains("no Teacher 2"), "{e}");
     }
 }
