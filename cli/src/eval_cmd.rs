@@ -55,7 +55,7 @@ pub struct EvalArgs {
     pub(crate) scenes: crate::scenes_cmd::Source,
 }
 
-fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
+pub(crate) fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
     let (split, pairs) = match name {
         "ext3" => (Split::Extension, Some(3)),
         "ext4" => (Split::Extension, Some(4)),

@@ -12,6 +12,7 @@ mod plot_cmd;
 mod record_cmd;
 mod render_cmd;
 mod scenes_cmd;
+mod tables_cmd;
 mod train_bench;
 
 use clap::{Parser, Subcommand};
@@ -56,6 +57,9 @@ enum Command {
     Plot(plot_cmd::PlotArgs),
     /// Score a policy on a benchmark split: Success k, Dist k, Success All, falls (paper Sec. 4.1).
     Eval(eval_cmd::EvalArgs),
+    /// The paper's Tables 1, 2 and 4 from the method pipelines in a runs directory
+    /// (configs/methods/*.toml), with the paper's figures beside ours.
+    Tables(tables_cmd::TablesArgs),
     /// Make a recording cut short by a crash (SIGKILL, power loss) readable again: copies every
     /// complete record into a new, properly finished MCAP file.
     Recover(record_cmd::RecoverArgs),
@@ -119,6 +123,7 @@ fn main() -> ExitCode {
         Command::DaggerServer(args) => cluster_cmd::dagger_server(args).map(|()| ExitCode::SUCCESS),
         Command::Record(args) => record_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Eval(args) => eval_cmd::run(args).map(|()| ExitCode::SUCCESS),
+        Command::Tables(args) => tables_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Recover(args) => record_cmd::recover(args).map(|()| ExitCode::SUCCESS),
         Command::Scenes(args) => scenes_cmd::run(args),
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),

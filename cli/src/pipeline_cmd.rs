@@ -29,15 +29,30 @@ pub struct PipelineArgs {
     /// Where `scripts/install-motions` put the clips (default: $LHM_MOTION_DIR or ~/.cache/lhm/motions).
     #[arg(long)]
     motion_dir: Option<PathBuf>,
+    /// A training configuration laid over every stage's own, key by key (e.g. smaller networks
+    /// for a quick look at a method's pipeline).
+    #[arg(long)]
+    overlay: Option<PathBuf>,
+    /// Multiply every stage's iteration budget by this (each stays at least 1): the same pipeline
+    /// at another budget, in the same proportions.
+    #[arg(long, value_parser = positive_scale)]
+    budget_scale: Option<f64>,
     #[command(flatten)]
     scenes: crate::scenes_cmd::Source,
+}
+
+fn positive_scale(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!("{text:?} is not a positive number")),
+    }
 }
 
 /// One training stage of the pipeline.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StageConfig {
-    /// `t1`, `t1-rr`, `t2` or `student`.
+    /// `t1`, `t1-rr`, `t2`, `student`, or the baselines' `e2e` and `curriculum`.
     pub stage: String,
     /// The stage's training configuration (a `lhm train --config` file, relative to the
     /// pipeline file); absent: the built-in default.
@@ -72,6 +87,8 @@ impl Default for EvalConfig {
 pub struct PipelineConfig {
     /// The pipeline's directory name under the runs directory.
     pub name: String,
+    /// How `lhm tables` names the method (default: the name).
+    pub label: Option<String>,
     pub actors: Option<usize>,
     /// Environments per actor process.
     pub envs: usize,
@@ -92,6 +109,7 @@ impl Default for PipelineConfig {
         };
         Self {
             name: "pipeline".into(),
+            label: None,
             actors: None,
             envs: 16,
             stages: vec![
@@ -158,6 +176,10 @@ impl PipelineConfig {
                     .then_some("a Teacher 1 stage (t1 or t1-rr) before it"),
                 Stage::Student => (!seen.contains(&Stage::T2))
                     .then_some("a t2 stage (and a Teacher 1 stage) before it"),
+                Stage::E2e => (!seen.is_empty())
+                    .then_some("to be the only stage (it trains one policy from scratch)"),
+                Stage::Curriculum => (!seen.iter().any(|s| matches!(s, Stage::T1 | Stage::T1Rr)))
+                    .then_some("a Teacher 1 stage (t1 or t1-rr) before it"),
             };
             if let Some(what) = needs {
                 bail!("stage {} ({}) needs {what}", i + 1, s.stage);
@@ -184,6 +206,47 @@ fn iterations_done(run_dir: &Path) -> Result<u64> {
     Ok(json.get("iteration").and_then(|v| v.as_u64()).unwrap_or(0))
 }
 
+/// What `<runs dir>/<pipeline>/pipeline.json` records of the pipeline that made the directory,
+/// for `lhm tables`: its method label, stages and budgets.
+#[derive(Debug, Clone, serde::Serialize, Deserialize)]
+pub struct Manifest {
+    pub name: String,
+    pub label: String,
+    /// (stage, iteration budget) in order, after `--budget-scale`.
+    pub stages: Vec<(String, u64)>,
+    pub budget_scale: Option<f64>,
+    pub overlay: Option<PathBuf>,
+}
+
+pub const MANIFEST_FILE: &str = "pipeline.json";
+
+/// A stage budget under `--budget-scale` (at least 1).
+fn scaled(iterations: u64, scale: Option<f64>) -> u64 {
+    match scale {
+        Some(scale) => ((iterations as f64 * scale).round() as u64).max(1),
+        None => iterations,
+    }
+}
+
+fn write_manifest(root: &Path, config: &PipelineConfig, args: &PipelineArgs) -> Result<()> {
+    let manifest = Manifest {
+        name: config.name.clone(),
+        label: config.label.clone().unwrap_or_else(|| config.name.clone()),
+        stages: config
+            .stages
+            .iter()
+            .map(|s| (s.stage.clone(), scaled(s.iterations, args.budget_scale)))
+            .collect(),
+        budget_scale: args.budget_scale,
+        overlay: args.overlay.clone(),
+    };
+    let path = root.join(MANIFEST_FILE);
+    let tmp = root.join(format!("{MANIFEST_FILE}.tmp"));
+    std::fs::write(&tmp, serde_json::to_vec_pretty(&manifest)?)
+        .and_then(|()| std::fs::rename(&tmp, &path))
+        .with_context(|| format!("writing {}", path.display()))
+}
+
 /// Exit status of a pipeline stopped by SIGINT/SIGTERM before it finished (128 + SIGINT, as a
 /// shell reports Ctrl-C), so scripts can tell it from a finished one.
 pub const STOPPED_EXIT: u8 = 130;
@@ -198,6 +261,7 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
     let stages = config.check()?;
     let root = args.runs_dir.join(&config.name);
     std::fs::create_dir_all(&root).with_context(|| format!("creating {}", root.display()))?;
+    write_manifest(&root, &config, &args)?;
     let local = LocalCluster {
         actors: args.actors.or(config.actors),
         envs: config.envs,
@@ -209,15 +273,25 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
     let mut teacher1: Option<PathBuf> = None;
     let mut teacher2: Option<PathBuf> = None;
     let mut student: Option<PathBuf> = None;
+    // A baseline's one policy for every cycle (e2e, curriculum).
+    let mut single: Option<PathBuf> = None;
     let mut upstream_trained = false;
     for (spec, stage) in config.stages.iter().zip(&stages) {
-        let mut train = match &spec.config {
-            Some(path) => TrainConfig::from_toml_file(path)?,
-            None => TrainConfig::default(),
+        let files: Vec<&Path> = spec
+            .config
+            .iter()
+            .chain(&args.overlay)
+            .map(|p| p.as_path())
+            .collect();
+        let mut train = if files.is_empty() {
+            TrainConfig::default()
+        } else {
+            TrainConfig::from_toml_files(&files)?
         };
+        let budget = scaled(spec.iterations, args.budget_scale);
         train.run_id = stage.name().into();
         train.runs_dir = root.clone();
-        train.max_iterations = Some(spec.iterations);
+        train.max_iterations = Some(budget);
         if args.scenes.scenes.is_some() {
             train.scenes.clone_from(&args.scenes.scenes);
         }
@@ -239,19 +313,17 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
                 dir.display()
             );
         }
-        if done >= spec.iterations {
+        if done >= budget {
             println!(
-                "stage {}: finished ({done} of {} iterations) in {}",
+                "stage {}: finished ({done} of {budget} iterations) in {}",
                 stage.name(),
-                spec.iterations,
                 dir.display()
             );
         } else {
             println!(
-                "stage {}: {} to iteration {} in {}",
+                "stage {}: {} to iteration {budget} in {}",
                 stage.name(),
                 if done > 0 { "resuming" } else { "training" },
-                spec.iterations,
                 dir.display()
             );
             upstream_trained = true;
@@ -267,11 +339,10 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
                 return Ok(false);
             }
             let reached = iterations_done(&dir)?;
-            if reached < spec.iterations {
+            if reached < budget {
                 bail!(
-                    "stage {} stopped at iteration {reached} of {} without being asked to",
-                    stage.name(),
-                    spec.iterations
+                    "stage {} stopped at iteration {reached} of {budget} without being asked to",
+                    stage.name()
                 );
             }
         }
@@ -282,16 +353,16 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
             Stage::T1 | Stage::T1Rr => teacher1 = policy,
             Stage::T2 => teacher2 = policy,
             Stage::Student => student = policy,
+            Stage::E2e | Stage::Curriculum => single = policy,
         }
     }
-    if let Some(t1) = &teacher1 {
-        let policies = Policies {
-            teacher1: t1,
-            teacher2: teacher2.as_deref(),
-            student: student.as_deref(),
-        };
-        evaluate(&config, &root, &policies, &args.scenes)?;
-    }
+    let policies = Policies {
+        teacher1: teacher1.as_deref(),
+        teacher2: teacher2.as_deref(),
+        student: student.as_deref(),
+        single: single.as_deref(),
+    };
+    evaluate(&config, &root, &policies, &args.scenes)?;
     if shutdown::requested() {
         println!(
             "pipeline {} stopped in eval; run the same command again to continue",
@@ -309,49 +380,95 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
 }
 
 /// The policies the pipeline's stages left.
-struct Policies<'a> {
-    teacher1: &'a Path,
-    teacher2: Option<&'a Path>,
-    student: Option<&'a Path>,
+pub(crate) struct Policies<'a> {
+    pub teacher1: Option<&'a Path>,
+    pub teacher2: Option<&'a Path>,
+    pub student: Option<&'a Path>,
+    pub single: Option<&'a Path>,
 }
 
-/// `lhm eval` on each split: the last Teacher 1 policy on the tasks' first pairs into
-/// `<pipeline>/eval/<split>/t1-first-pair/`; with a Teacher 2, the paper's "T" row (Teacher 1 on
-/// the first cycle, Teacher 2 on the later ones) on whole tasks into `.../teachers/`; with a
-/// student, its "S" row (the one policy through every cycle) into `.../student/`. An evaluation
-/// whose table is already there is skipped.
+/// One evaluation of a pipeline: its directory name under `eval/<split>/`, the policy, the
+/// Teacher 1 that plays first cycles (the "T" rows), whether only first pairs are played.
+pub(crate) struct EvalRow<'a> {
+    pub name: &'static str,
+    pub policy: &'a Path,
+    pub teacher1: Option<&'a Path>,
+    pub first_pair: bool,
+}
+
+impl<'a> Policies<'a> {
+    /// The rows of the pipeline's evaluation: the last Teacher 1 on first pairs, the teachers
+    /// through the switch, the student, a baseline's one policy — whichever the stages left.
+    pub fn rows(&self) -> Vec<EvalRow<'a>> {
+        let mut rows = Vec::new();
+        if let Some(t1) = self.teacher1 {
+            rows.push(EvalRow {
+                name: "t1-first-pair",
+                policy: t1,
+                teacher1: None,
+                first_pair: true,
+            });
+            if let Some(t2) = self.teacher2 {
+                rows.push(EvalRow {
+                    name: "teachers",
+                    policy: t2,
+                    teacher1: Some(t1),
+                    first_pair: false,
+                });
+            }
+        }
+        if let Some(s) = self.student {
+            rows.push(EvalRow {
+                name: "student",
+                policy: s,
+                teacher1: None,
+                first_pair: false,
+            });
+        }
+        if let Some(p) = self.single {
+            rows.push(EvalRow {
+                name: "policy",
+                policy: p,
+                teacher1: None,
+                first_pair: false,
+            });
+        }
+        rows
+    }
+}
+
+/// `lhm eval` on each split for each of [`Policies::rows`] into `<pipeline>/eval/<split>/<row>/`:
+/// Teacher 1 on first pairs (`t1-first-pair`), the paper's "T" row (Teacher 1 on the first
+/// cycle, Teacher 2 on the later ones: `teachers`), its "S" row (the student through every
+/// cycle: `student`), a baseline's one policy (`policy`). An evaluation whose table is already
+/// there is skipped.
 fn evaluate(
     config: &PipelineConfig,
     root: &Path,
     policies: &Policies<'_>,
     scenes: &crate::scenes_cmd::Source,
 ) -> Result<()> {
-    let teacher1 = policies.teacher1;
     for split in &config.eval.splits {
-        // (row, policy, Teacher 1 for the first cycle, first pair only)
-        let mut rows = vec![("t1-first-pair", teacher1, None, true)];
-        if let Some(t2) = policies.teacher2 {
-            rows.push(("teachers", t2, Some(teacher1.to_path_buf()), false));
-        }
-        if let Some(s) = policies.student {
-            rows.push(("student", s, None, false));
-        }
-        for (row, policy, first, first_pair) in rows {
-            let out = root.join("eval").join(split).join(row);
+        for row in policies.rows() {
+            let out = root.join("eval").join(split).join(row.name);
             if out.join("table.json").is_file() {
-                println!("eval {split} {row}: finished, table in {}", out.display());
+                println!(
+                    "eval {split} {}: finished, table in {}",
+                    row.name,
+                    out.display()
+                );
                 continue;
             }
             if shutdown::requested() {
                 return Ok(());
             }
-            println!("eval {split} {row}: {}", policy.display());
+            println!("eval {split} {}: {}", row.name, row.policy.display());
             crate::eval_cmd::run(crate::eval_cmd::EvalArgs {
-                policy: policy.to_path_buf(),
+                policy: row.policy.to_path_buf(),
                 split: split.clone(),
                 seeds: config.eval.seeds,
-                first_pair,
-                teacher1: first,
+                first_pair: row.first_pair,
+                teacher1: row.teacher1.map(Path::to_path_buf),
                 limit: config.eval.limit,
                 config: None,
                 json: false,
@@ -360,7 +477,7 @@ fn evaluate(
                 gifs: 0,
                 scenes: scenes.clone(),
             })
-            .with_context(|| format!("eval {split} {row}"))?;
+            .with_context(|| format!("eval {split} {}", row.name))?;
         }
     }
     Ok(())
@@ -388,6 +505,32 @@ mod tests {
             .stages
             .iter()
             .all(|s| s.config.as_ref().is_some_and(|p| p.is_file())));
+        // Every method of the tables, each a valid pipeline.
+        let methods = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/methods");
+        for (method, stages) in [
+            (
+                "lhm",
+                &[Stage::T1, Stage::T1Rr, Stage::T2, Stage::Student][..],
+            ),
+            ("no-rr", &[Stage::T1, Stage::T2, Stage::Student][..]),
+            (
+                "no-amp",
+                &[Stage::T1, Stage::T1Rr, Stage::T2, Stage::Student][..],
+            ),
+            ("e2e-rl", &[Stage::E2e][..]),
+            ("curriculum-rl", &[Stage::T1, Stage::Curriculum][..]),
+        ] {
+            let c =
+                PipelineConfig::from_toml_file(&methods.join(format!("{method}.toml"))).unwrap();
+            assert_eq!(c.check().unwrap(), stages, "{method}");
+            assert_eq!(c.name, method);
+            // The same budget for every method, as the paper insists.
+            assert_eq!(
+                c.stages.iter().map(|s| s.iterations).sum::<u64>(),
+                1000,
+                "{method}"
+            );
+        }
         let hour = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/pipeline-hour.toml");
         let c = PipelineConfig::from_toml_file(&hour).unwrap();
         assert_eq!(
@@ -409,6 +552,10 @@ mod tests {
         assert!(e.contains("twice"), "{e}");
         let e = err("[[stage]]\nstage = \"t1\"\niterations = 1\n[[stage]]\nstage = \"student\"\niterations = 1\n");
         assert!(e.contains("needs a t2 stage"), "{e}");
+        let e = err("[[stage]]\nstage = \"t1\"\niterations = 1\n[[stage]]\nstage = \"e2e\"\niterations = 1\n");
+        assert!(e.contains("only stage"), "{e}");
+        let e = err("[[stage]]\nstage = \"curriculum\"\niterations = 1\n");
+        assert!(e.contains("Teacher 1 stage"), "{e}");
         assert!(toml::from_str::<PipelineConfig>("stages = 3").is_err());
         // t1 then t2 (no fine-tuning) is a valid pipeline.
         assert_eq!(

@@ -269,18 +269,28 @@ impl TrainConfig {
     /// rest of the run's PPO settings (deserialising a partial `[ppo]` on its own would fill the
     /// gaps from `PpoConfig::default()`, whose values are not the run's).
     pub fn from_toml_file(path: &Path) -> Result<Self, ServiceError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
-        let user: toml::Table = text
-            .parse()
-            .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
+        Self::from_toml_files(&[path])
+    }
+
+    /// [`Self::from_toml_file`] with several files laid over the defaults in order, each key by
+    /// key over the ones before (e.g. a stage's configuration, then a pipeline-wide overlay).
+    /// Errors name the file that was read last when the merged fields do not deserialise.
+    pub fn from_toml_files(paths: &[&Path]) -> Result<Self, ServiceError> {
         let mut merged = toml::Table::try_from(Self::default())
             .map_err(|e| ServiceError::Config(format!("the built-in defaults: {e}")))?;
-        overlay(&mut merged, user);
+        for path in paths {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
+            let user: toml::Table = text
+                .parse()
+                .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
+            overlay(&mut merged, user);
+        }
+        let named: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
         serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| {
             ServiceError::Config(format!(
                 "{}: field `{}`: {}",
-                path.display(),
+                named.join(" + "),
                 e.path(),
                 e.inner()
             ))

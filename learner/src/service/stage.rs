@@ -26,10 +26,25 @@ pub enum Stage {
     /// The unified student, distilled from both teachers by DAgger on two-object tasks.
     #[serde(rename = "student")]
     Student,
+    /// Baseline "End-to-End RL": one policy trained from scratch by PPO (+AMP) on whole
+    /// two-object tasks, every cycle in one reset-free episode.
+    #[serde(rename = "e2e")]
+    E2e,
+    /// Baseline "Curriculum RL" (the single-teacher case): the Teacher 1 policy trained further
+    /// by PPO (+AMP) on whole two-object tasks, so one policy learns every cycle.
+    #[serde(rename = "curriculum")]
+    Curriculum,
 }
 
 impl Stage {
-    pub const ALL: [Stage; 4] = [Stage::T1, Stage::T1Rr, Stage::T2, Stage::Student];
+    pub const ALL: [Stage; 6] = [
+        Stage::T1,
+        Stage::T1Rr,
+        Stage::T2,
+        Stage::Student,
+        Stage::E2e,
+        Stage::Curriculum,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -37,17 +52,19 @@ impl Stage {
             Stage::T1Rr => "t1-rr",
             Stage::T2 => "t2",
             Stage::Student => "student",
+            Stage::E2e => "e2e",
+            Stage::Curriculum => "curriculum",
         }
     }
 
-    /// `t1`, `t1-rr`, `t2` or `student`.
+    /// `t1`, `t1-rr`, `t2`, `student`, or the baselines' `e2e` and `curriculum`.
     pub fn parse(text: &str) -> Result<Self, ServiceError> {
         Self::ALL
             .into_iter()
             .find(|s| s.name() == text)
             .ok_or_else(|| {
                 ServiceError::Config(format!(
-                    "stage {text:?} is not one of t1, t1-rr, t2, student"
+                    "stage {text:?} is not one of t1, t1-rr, t2, student, e2e, curriculum"
                 ))
             })
     }
@@ -67,6 +84,10 @@ impl Stage {
     /// - `student`: role student, both teachers frozen as labellers (the given ones win over the
     ///   configuration's), no AMP (it learns by regression), on the two-object training tasks
     ///   unless the configuration lists others; its weights start fresh.
+    /// - `e2e`: role teacher1 from scratch (a `teacher1` is refused) on the two-object training
+    ///   tasks, whole episodes, unless the configuration lists other tasks.
+    /// - `curriculum`: role teacher1 initialised like `t1-rr` (the configuration's `init_from`,
+    ///   else `teacher1`), on the two-object training tasks unless the configuration lists others.
     pub fn apply(
         self,
         config: &mut TrainConfig,
@@ -87,7 +108,32 @@ impl Stage {
                 self.name()
             )));
         }
+        let whole_tasks = |config: &mut TrainConfig| {
+            if config.tasks == lhm_cluster::TaskSet::TrainSingleObject {
+                config.tasks = lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train);
+            }
+        };
         match self {
+            Stage::E2e => {
+                if let Some(t) = teacher1 {
+                    return Err(ServiceError::Config(format!(
+                        "stage e2e trains one policy from scratch; it takes no Teacher 1 ({})",
+                        t.display()
+                    )));
+                }
+                config.role = "teacher1".into();
+                whole_tasks(config);
+            }
+            Stage::Curriculum => {
+                let from: PathBuf = match (&config.init_from, teacher1) {
+                    (Some(i), _) => i.clone(),
+                    (None, Some(t)) => t.to_path_buf(),
+                    (None, None) => need("--init-from")?,
+                };
+                config.role = "teacher1".into();
+                config.init_from = Some(from);
+                whole_tasks(config);
+            }
             Stage::T1 => {
                 if let Some(t) = teacher1 {
                     return Err(ServiceError::Config(format!(
@@ -122,9 +168,7 @@ impl Stage {
                     config.init_from = Some(t1.clone());
                 }
                 config.teacher1 = Some(t1);
-                if config.tasks == lhm_cluster::TaskSet::TrainSingleObject {
-                    config.tasks = lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train);
-                }
+                whole_tasks(config);
             }
             Stage::Student => {
                 let pick = |given: Option<&Path>, configured: &Option<PathBuf>, what: &str| {
@@ -146,9 +190,7 @@ impl Stage {
                 config.teacher2 = Some(t2);
                 config.role = "student".into();
                 config.amp_enabled = false;
-                if config.tasks == lhm_cluster::TaskSet::TrainSingleObject {
-                    config.tasks = lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train);
-                }
+                whole_tasks(config);
             }
         }
         Ok(())
@@ -218,6 +260,32 @@ mod tests {
         );
         assert_eq!(
             t2.tasks,
+            lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train)
+        );
+    }
+
+    #[test]
+    fn the_baselines_train_one_policy_on_whole_tasks() {
+        let mut e2e = TrainConfig::default();
+        assert!(Stage::E2e
+            .apply(&mut e2e, Some(Path::new("runs/p/t1/policy")), None)
+            .is_err());
+        Stage::E2e.apply(&mut e2e, None, None).unwrap();
+        assert_eq!(e2e.role, "teacher1");
+        assert_eq!(e2e.init_from, None);
+        assert_eq!(
+            e2e.tasks,
+            lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train)
+        );
+        let mut c = TrainConfig::default();
+        assert!(Stage::Curriculum.apply(&mut c, None, None).is_err());
+        Stage::Curriculum
+            .apply(&mut c, Some(Path::new("runs/p/t1/policy")), None)
+            .unwrap();
+        assert_eq!(c.init_from.as_deref(), Some(Path::new("runs/p/t1/policy")));
+        assert_eq!(c.env.weights.release_retreat, 0.0);
+        assert_eq!(
+            c.tasks,
             lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train)
         );
     }
