@@ -49,7 +49,7 @@ fn run_actors(
     chunks: u64,
     publish: bool,
 ) -> Result<Vec<f64>> {
-    let exe = std::env::current_exe().context("locating lhm")?;
+    let exe = crate::cluster_cmd::this_executable()?;
     let mut children = Vec::new();
     for i in 0..count {
         let mut cmd = Command::new(&exe);

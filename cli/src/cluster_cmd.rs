@@ -359,7 +359,7 @@ pub(crate) fn train_locally(
         let per_set = actors * args.envs * config.chunk_steps as usize;
         config.chunk_sets_per_version = config.batch_steps.div_ceil(per_set).max(1) as u32;
     }
-    let exe = std::env::current_exe().context("locating the lhm executable")?;
+    let exe = this_executable()?;
     let run_dir = config.run_dir();
     std::fs::create_dir_all(&run_dir).with_context(|| format!("creating {}", run_dir.display()))?;
     let mut children: Vec<Child> = Vec::new();
@@ -412,6 +412,18 @@ pub(crate) fn train_locally(
         return Err(e);
     }
     result
+}
+
+/// The running `lhm` to start actor and dagger-server processes from. On Linux that is
+/// `/proc/self/exe`, the very file this process runs even after a rebuild replaced it on disk
+/// (the path `current_exe` gives then ends in " (deleted)" and cannot be started; a pipeline's
+/// later stages failed so), so every process of a run is the same build.
+pub(crate) fn this_executable() -> Result<PathBuf> {
+    let proc_exe = PathBuf::from("/proc/self/exe");
+    if cfg!(target_os = "linux") && proc_exe.exists() {
+        return Ok(proc_exe);
+    }
+    std::env::current_exe().context("locating the lhm executable")
 }
 
 /// Starts `exe args` with stdout and stderr appended to `log` (not truncated: a resumed run keeps

@@ -95,7 +95,7 @@ pub fn run(iterations: u64, warmup: u64, amp: bool) -> Result<TrainBench> {
     let dir = std::env::temp_dir().join(format!("lhm-bench-train-{}", std::process::id()));
     // A fresh run: an old one with this name would be resumed.
     let _ = std::fs::remove_dir_all(&dir);
-    let exe = std::env::current_exe().context("locating the lhm executable")?;
+    let exe = crate::cluster_cmd::this_executable()?;
     let mut cmd = Command::new(exe);
     cmd.args(["train", "--run-id", "bench-train", "--max-iterations"])
         .arg(iterations.to_string())
