@@ -370,6 +370,12 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
         );
         return Ok(false);
     }
+    if !config.eval.splits.is_empty() {
+        let summary = eval_summary(&config, &root, &policies)?;
+        let path = root.join("eval").join("summary.md");
+        std::fs::write(&path, &summary).with_context(|| format!("writing {}", path.display()))?;
+        println!("\n{summary}");
+    }
     println!(
         "pipeline {}: every stage finished ({:.0} s this session); runs in {}",
         config.name,
@@ -377,6 +383,54 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
         root.display()
     );
     Ok(true)
+}
+
+/// Every evaluation of the pipeline in one Markdown table per split (the paper's columns for two
+/// objects; a first-pair row has no second cycle), from the `table.json` files `evaluate` wrote.
+fn eval_summary(config: &PipelineConfig, root: &Path, policies: &Policies<'_>) -> Result<String> {
+    let mut out = String::new();
+    for split in &config.eval.splits {
+        out.push_str(&format!(
+            "### {} on `{split}` ({} seed{} per task)\n\n| Row | Success 1 (%) | Success 2 (%) | \
+             Success All (%) | Dist 1 (m) | Dist 2 (m) | Falls (%) | Tasks |\n|---|---|---|---|---|---|---|---|\n",
+            config.name,
+            config.eval.seeds,
+            if config.eval.seeds == 1 { "" } else { "s" }
+        ));
+        for row in policies.rows() {
+            let path = root
+                .join("eval")
+                .join(split)
+                .join(row.name)
+                .join("table.json");
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let t: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("parsing {}", path.display()))?;
+            let cell = |key: &str, scale: f64, digits: usize| match (
+                t.get(key).and_then(|v| v.as_f64()),
+                t.get(format!("{key}_std")).and_then(|v| v.as_f64()),
+            ) {
+                (Some(m), Some(s)) => {
+                    format!("{:.digits$} ± {:.digits$}", m * scale, s * scale)
+                }
+                _ => "—".into(),
+            };
+            out.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                row.name,
+                cell("success_1", 100.0, 1),
+                cell("success_2", 100.0, 1),
+                cell("success_all", 100.0, 1),
+                cell("dist_1", 1.0, 2),
+                cell("dist_2", 1.0, 2),
+                cell("fall_rate", 100.0, 1),
+                t.get("tasks").and_then(|v| v.as_u64()).unwrap_or(0)
+            ));
+        }
+        out.push('\n');
+    }
+    Ok(out)
 }
 
 /// The policies the pipeline's stages left.

@@ -223,6 +223,11 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
         );
     }
 
+    // The pipeline ends with every evaluation in one table per split.
+    let summary = std::fs::read_to_string(root.join("eval/summary.md")).unwrap_or_default();
+    for row in ["| t1-first-pair |", "| teachers |", "| student |"] {
+        assert_eq!(summary.matches(row).count(), 2, "{row}: {summary}");
+    }
     // A fourth run has nothing left to do.
     let mut fourth = start_pipeline(&dir, &config, "fourth.log");
     let status = fourth.wait_exit(Duration::from_secs(60));
