@@ -291,7 +291,8 @@ impl DaggerConfig {
 #[serde(default, deny_unknown_fields)]
 pub struct StudentConfig {
     pub adam: AdamConfig,
-    /// Passes over a sample of the dataset per round.
+    /// Rows trained on per round, in multiples of the newest round's rows, drawn uniformly from
+    /// the whole dataset.
     pub epochs: usize,
     pub minibatch_size: usize,
     pub max_grad_norm: f64,
@@ -342,18 +343,31 @@ impl StudentTrainer {
 
     /// Mean squared action error over all of `data`.
     pub fn loss(&self, student: &ActorCritic, data: &DaggerDataset) -> LearnerResult<f64> {
-        let all: Vec<usize> = (0..data.len()).collect();
+        self.loss_on(student, data, &(0..data.len()).collect::<Vec<_>>())
+    }
+
+    /// Mean squared action error over the rows `rows` of `data`.
+    fn loss_on(
+        &self,
+        student: &ActorCritic,
+        data: &DaggerDataset,
+        rows: &[usize],
+    ) -> LearnerResult<f64> {
         let mut total = 0.0;
-        for chunk in all.chunks(4096) {
+        for chunk in rows.chunks(4096) {
             let (obs, labels) = gather(data, chunk);
             let mse = mse(student, &obs, &labels, chunk.len())?;
             total += mse.to_scalar::<f32>()? as f64 * chunk.len() as f64;
         }
-        Ok(total / data.len().max(1) as f64)
+        Ok(total / rows.len().max(1) as f64)
     }
 
     /// One round: folds the newest round's observations into the student's normaliser, then
-    /// `epochs` passes of shuffled minibatches over the whole dataset.
+    /// `epochs` × the newest round's rows, drawn uniformly from the whole aggregated dataset, in
+    /// minibatches. Each round costs the same however large the dataset has grown (full passes
+    /// over it took 13.6 s a round at 100k rows, against ~1 s of collection); every row stays
+    /// equally likely to be trained on. The losses before and after are measured on the same
+    /// uniform sample of at most [`LOSS_ROWS`] rows.
     pub fn train_round(
         &mut self,
         student: &mut ActorCritic,
@@ -364,7 +378,7 @@ impl StudentTrainer {
         if data.is_empty() {
             return Err(LearnerError::Invalid("the DAgger dataset is empty".into()));
         }
-        let newest = newest_round_rows.min(data.len());
+        let newest = newest_round_rows.clamp(1, data.len());
         if let Some(norm) = &mut student.obs_norm {
             let (obs, _) = gather(
                 data,
@@ -372,33 +386,41 @@ impl StudentTrainer {
             );
             norm.update(&obs)?;
         }
-        let loss_before = self.loss(student, data)?;
+        let probe: Vec<usize> = if data.len() <= LOSS_ROWS {
+            (0..data.len()).collect()
+        } else {
+            (0..LOSS_ROWS).map(|_| rng.below(data.len())).collect()
+        };
+        let loss_before = self.loss_on(student, data, &probe)?;
         let vars: Vec<_> = student
             .policy
             .named_vars("policy")
             .into_iter()
             .map(|v| v.1)
             .collect();
+        let draws: Vec<usize> = (0..self.config.epochs.max(1) * newest)
+            .map(|_| rng.below(data.len()))
+            .collect();
         let mut minibatches = 0;
-        for _ in 0..self.config.epochs {
-            let order = rng.permutation(data.len());
-            for mb in order.chunks(self.config.minibatch_size.max(1)) {
-                let (obs, labels) = gather(data, mb);
-                let loss = mse(student, &obs, &labels, mb.len())?;
-                let store = loss.backward()?;
-                let mut grads = gradients(&vars, &store)?;
-                clip_global_norm(&mut grads, self.config.max_grad_norm);
-                self.adam.step(&vars, &grads)?;
-                minibatches += 1;
-            }
+        for mb in draws.chunks(self.config.minibatch_size.max(1)) {
+            let (obs, labels) = gather(data, mb);
+            let loss = mse(student, &obs, &labels, mb.len())?;
+            let store = loss.backward()?;
+            let mut grads = gradients(&vars, &store)?;
+            clip_global_norm(&mut grads, self.config.max_grad_norm);
+            self.adam.step(&vars, &grads)?;
+            minibatches += 1;
         }
         Ok(StudentStats {
             loss_before,
-            loss_after: self.loss(student, data)?,
+            loss_after: self.loss_on(student, data, &probe)?,
             minibatches,
         })
     }
 }
+
+/// Rows on which a round's losses are measured (all of them while the dataset is smaller).
+pub const LOSS_ROWS: usize = 8192;
 
 /// The rows `rows` of `data` as (observations, labels), row-major.
 fn gather(data: &DaggerDataset, rows: &[usize]) -> (Vec<f32>, Vec<f32>) {
@@ -539,7 +561,12 @@ mod tests {
         let mut d = DaggerDataset::open(&dir, 4, 2, 10_000).unwrap();
         let mut student =
             ActorCritic::new(4, 2, &ActorCriticConfig::with_hidden(&[32, 32])).unwrap();
-        let mut trainer = StudentTrainer::new(StudentConfig::default(), &student).unwrap();
+        // Rounds of 400 rows: 20 × 400 rows drawn per round (16 minibatches).
+        let config = StudentConfig {
+            epochs: 20,
+            ..StudentConfig::default()
+        };
+        let mut trainer = StudentTrainer::new(config, &student).unwrap();
         let held_out = states(500, &mut rng);
         let err = |s: &ActorCritic| {
             let got = s.act_deterministic(&held_out).unwrap();
