@@ -10,14 +10,16 @@ use zenoh::Wait;
 
 use crate::rollout::Labeller;
 
-/// How long one label query waits for a reply before it is asked again.
-const QUERY_TIMEOUT: Duration = Duration::from_secs(10);
+/// How long one label query waits for a reply before it is asked again (short, so a stop
+/// request is seen soon when the server has gone away without replying).
+const QUERY_TIMEOUT: Duration = Duration::from_secs(2);
 /// How often a student waiting for labels says why.
 const WAITING_LINE_EVERY: Duration = Duration::from_secs(30);
 
 /// Asks the dagger-server. A missing server, or one without teacher weights yet, is waited for
 /// (a dagger-server may start after the actors, or restart); the actor's stop request ends the
-/// wait with an error.
+/// wait with an error. Any other error reply (a refused request, a failed inference) or an
+/// unreadable reply cannot get better by asking again and ends the rollout with it.
 pub struct DaggerLabels<'s> {
     session: &'s zenoh::Session,
     key: String,
@@ -58,19 +60,17 @@ impl<'s> DaggerLabels<'s> {
         let mut why = format!("no dagger-server answered on {}", self.key);
         while let Ok(reply) = replies.recv() {
             let Ok(sample) = reply.result() else { continue };
-            let reply = match LabelReply::decode_checked(&sample.payload().to_bytes()) {
-                Ok(r) => r,
-                Err(e) => {
-                    why = format!("an unreadable label reply: {e}");
-                    continue;
-                }
-            };
+            let reply = LabelReply::decode_checked(&sample.payload().to_bytes())
+                .map_err(|e| format!("an unreadable label reply: {e}"))?;
             if reply.request_id != request.request_id {
                 continue;
             }
             if !reply.error.is_empty() {
-                why = format!("the dagger-server says: {}", reply.error);
-                continue;
+                if reply.error.starts_with(lhm_protos::LABEL_ERROR_NO_WEIGHTS) {
+                    why = format!("the dagger-server says: {}", reply.error);
+                    continue;
+                }
+                return Err(format!("the dagger-server says: {}", reply.error));
             }
             if reply.num_states != request.num_states {
                 return Err(format!(

@@ -17,8 +17,8 @@
 //! and another drawn. A cycle that times out unplaced still hands off, as at evaluation, where
 //! the same switch hands Teacher 2 whatever Teacher 1 left.
 //!
-//! The student's rollouts (role `student`, [`Behaviour::Dagger`]) play whole multi-object tasks
-//! reset-free; every state is labelled by the teachers through a [`Labeller`] (first cycle:
+//! The student's rollouts (role `student`, [`Behaviour::Dagger`]) play the run's tasks (two
+//! objects in the student stage) reset-free through every cycle; every state is labelled by the teachers through a [`Labeller`] (first cycle:
 //! Teacher 1, later cycles: Teacher 2), a step executes the teachers' action with probability β
 //! and the student's mean action otherwise, and the chunks carry the labels as actions.
 
@@ -455,7 +455,12 @@ impl Rollout {
                         labels.len()
                     )));
                 }
-                let mut executed = student.act_deterministic(obs)?;
+                // β = 1 (DAgger's first round): the teachers act alone, no student pass needed.
+                let mut executed = if *teacher_mix >= 1.0 {
+                    labels.clone()
+                } else {
+                    student.act_deterministic(obs)?
+                };
                 for i in 0..n {
                     if (self.rng.next_f64() as f32) < *teacher_mix {
                         executed[i * act_dim..(i + 1) * act_dim]

@@ -293,11 +293,13 @@ fn a_student_rollout_records_teacher_labels_and_mixes_by_beta() {
         assert_eq!(c.num_steps, 8);
         assert_eq!(c.role, Role::Student as i32);
         TrajectoryChunk::decode_checked(&c.encode_checked().unwrap()).unwrap();
-        // Each recorded action is the teacher's label of the recorded state.
-        assert_eq!(
-            c.actions,
-            teacher.act_deterministic(&c.observations).unwrap()
-        );
+        // Each recorded action is the teacher's label of the recorded state (labelled in batches
+        // of 2 there, of 8 here: matrix kernels may round differently by batch size).
+        let relabelled = teacher.act_deterministic(&c.observations).unwrap();
+        assert_eq!(c.actions.len(), relabelled.len());
+        for (a, b) in c.actions.iter().zip(&relabelled) {
+            assert!((a - b).abs() <= 1e-5 * (1.0 + b.abs()), "{a} vs {b}");
+        }
         assert!(c.log_probs.iter().all(|&x| x == 0.0));
     }
     let states = |chunks: &[TrajectoryChunk]| -> Vec<Vec<f32>> {

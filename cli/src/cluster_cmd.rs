@@ -93,7 +93,13 @@ impl LearnerOpts {
             config.scenes = Some(dir.clone());
         }
         if let Some(stage) = &self.stage {
-            Stage::parse(stage)?.apply(
+            let stage_kind = Stage::parse(stage)?;
+            // A stage's run is its own: without --run-id (or one in the config) it is named after
+            // the stage, never the plain Teacher 1 run's default.
+            if self.run_id.is_none() && config.run_id == TrainConfig::default().run_id {
+                config.run_id = stage_kind.name().into();
+            }
+            stage_kind.apply(
                 &mut config,
                 self.teacher1.as_deref(),
                 self.teacher2.as_deref(),
@@ -167,7 +173,7 @@ pub struct DaggerServerArgs {
     /// The learner's (or a router's) endpoint, e.g. tcp/10.0.0.5:7447.
     #[arg(long, required = true, value_parser = endpoint)]
     connect: Vec<String>,
-    /// The student run whose teachers label its states.
+    /// The student run whose teachers label its states (`lhm train --stage student`'s default).
     #[arg(long, default_value = "student")]
     run_id: String,
     /// A Zenoh JSON5 configuration (TLS, authentication); explicit endpoints override its own.

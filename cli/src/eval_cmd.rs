@@ -55,6 +55,37 @@ pub struct EvalArgs {
     pub(crate) scenes: crate::scenes_cmd::Source,
 }
 
+/// The training iteration a checkpoint was saved at (`payload.counters.iteration` of
+/// `<stem>.json`), to tell an evaluation of this policy from one of an earlier save.
+pub(crate) fn policy_iteration(policy: &std::path::Path) -> Option<u64> {
+    let stem = lhm_nets::checkpoint::stem_of(policy);
+    let text = std::fs::read_to_string(stem.with_extension("json")).ok()?;
+    let json: serde_json::Value = serde_json::from_str(&text).ok()?;
+    json.pointer("/payload/counters/iteration")?.as_u64()
+}
+
+/// Whether `dir/table.json` evaluated exactly these policies (their saved iterations) with these
+/// seeds over `tasks` tasks: then it can be reused.
+pub(crate) fn table_is_current(
+    dir: &std::path::Path,
+    policy: &std::path::Path,
+    teacher1: Option<&std::path::Path>,
+    seeds: u64,
+    tasks: Option<usize>,
+) -> bool {
+    let Some(table) = std::fs::read(dir.join("table.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+    else {
+        return false;
+    };
+    let field = |k: &str| table.get(k).and_then(|v| v.as_u64());
+    field("seeds") == Some(seeds)
+        && tasks.is_none_or(|n| field("tasks") == Some(n as u64))
+        && field("policy_iteration") == policy_iteration(policy)
+        && field("teacher1_iteration") == teacher1.and_then(policy_iteration)
+}
+
 pub(crate) fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
     let (split, pairs) = match name {
         "ext3" => (Split::Extension, Some(3)),
@@ -160,6 +191,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
         "wall_s": wall,
         "episodes_per_s": table.episodes as f64 / wall,
         "control_steps_per_s": steps as f64 / wall,
+        "policy": a.policy.display().to_string(),
+        "policy_iteration": policy_iteration(&a.policy),
+        "teacher1_iteration": a.teacher1.as_deref().and_then(policy_iteration),
     });
     if let Some(map) = json.as_object_mut() {
         for (k, v) in table.flat() {

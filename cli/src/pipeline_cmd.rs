@@ -1,6 +1,6 @@
-//! `lhm pipeline`: the paper's stages in order — `t1` → `t1-rr` → `t2` → `student` → eval — each
-//! a run of the
-//! same local actor–learner cluster as `lhm train` (`Stage` presets its configuration), in
+//! `lhm pipeline`: the paper's stages in order — `t1` → `t1-rr` → `t2` → `student` → eval — or a
+//! baseline's (`e2e`; `t1` → `curriculum`), each a run of the same local actor–learner cluster as
+//! `lhm train` (`Stage` presets its configuration), in
 //! `<runs dir>/<pipeline>/<stage>/`. A stage whose status says it reached its budget is skipped
 //! and an unfinished one resumes from its checkpoint, so running the command again continues
 //! the pipeline wherever it stopped (Ctrl-C, SIGKILL, power loss).
@@ -99,8 +99,9 @@ pub struct PipelineConfig {
 }
 
 impl Default for PipelineConfig {
-    /// The laptop pipeline: ~1 h of Teacher 1, 15 min each of fine-tuning, Teacher 2 and the
-    /// student at the 2-core loop's ~1,400 samples/s (4,096-sample iterations).
+    /// The laptop pipeline: ~1 h of Teacher 1 and ~15-25 min each of fine-tuning, Teacher 2 and
+    /// the student on 2 cores (measured at a third of these budgets, configs/pipeline-hour.toml:
+    /// ~1,500, ~1,400, ~800 and ~1,200 samples/s; RESULTS.md).
     fn default() -> Self {
         let stage = |stage: &str, iterations| StageConfig {
             stage: stage.into(),
@@ -144,7 +145,8 @@ impl PipelineConfig {
     }
 
     /// The stages in an order that can run: each known, each budget positive, `t1-rr` after a
-    /// `t1`, `t2` after a Teacher 1 stage, each stage at most once.
+    /// `t1`, `t2` and `curriculum` after a Teacher 1 stage and no Teacher 1 stage after `t2`,
+    /// `student` after `t2`, `e2e` alone, each stage at most once.
     pub fn check(&self) -> Result<Vec<Stage>> {
         lhm_protos::keys::check_chunk("pipeline name", &self.name)?;
         if self.envs == 0 {
@@ -154,7 +156,7 @@ impl PipelineConfig {
             bail!("actors must be at least 1");
         }
         if self.stages.is_empty() {
-            bail!("no [[stage]]: list t1, t1-rr, t2 in order");
+            bail!("no [[stage]]: list t1, t1-rr, t2, student in order (or a baseline's stages)");
         }
         let mut seen: Vec<Stage> = Vec::new();
         for (i, s) in self.stages.iter().enumerate() {
@@ -168,6 +170,16 @@ impl PipelineConfig {
             }
             if seen.contains(&stage) {
                 bail!("stage {} ({}) is listed twice", i + 1, s.stage);
+            }
+            if seen.contains(&Stage::T2) && matches!(stage, Stage::T1 | Stage::T1Rr) {
+                // The student and the "T" rows pair the last Teacher 1 with t2, which must have
+                // started from that very Teacher 1's terminal states.
+                bail!(
+                    "stage {} ({}) needs to come before t2 (t2 starts from the last Teacher 1's \
+                     terminal states)",
+                    i + 1,
+                    s.stage
+                );
             }
             let needs = match stage {
                 Stage::T1 => None,
@@ -502,10 +514,21 @@ fn evaluate(
     policies: &Policies<'_>,
     scenes: &crate::scenes_cmd::Source,
 ) -> Result<()> {
+    let bench = scenes.load()?;
     for split in &config.eval.splits {
         for row in policies.rows() {
             let out = root.join("eval").join(split).join(row.name);
-            if out.join("table.json").is_file() {
+            let tasks = crate::eval_cmd::split_tasks(&bench, split)?.len();
+            let tasks = config.eval.limit.map_or(tasks, |n| tasks.min(n));
+            // Reused only when it evaluated these very policies: a stage trained further since
+            // (a larger budget) is evaluated again.
+            if crate::eval_cmd::table_is_current(
+                &out,
+                row.policy,
+                row.teacher1,
+                config.eval.seeds,
+                Some(tasks),
+            ) {
                 println!(
                     "eval {split} {}: finished, table in {}",
                     row.name,
@@ -608,6 +631,8 @@ mod tests {
         assert!(e.contains("needs a t2 stage"), "{e}");
         let e = err("[[stage]]\nstage = \"t1\"\niterations = 1\n[[stage]]\nstage = \"e2e\"\niterations = 1\n");
         assert!(e.contains("only stage"), "{e}");
+        let e = err("[[stage]]\nstage = \"t1\"\niterations = 1\n[[stage]]\nstage = \"t2\"\niterations = 1\n[[stage]]\nstage = \"t1-rr\"\niterations = 1\n");
+        assert!(e.contains("before t2"), "{e}");
         let e = err("[[stage]]\nstage = \"curriculum\"\niterations = 1\n");
         assert!(e.contains("Teacher 1 stage"), "{e}");
         assert!(toml::from_str::<PipelineConfig>("stages = 3").is_err());

@@ -207,10 +207,15 @@ fn evaluation(
     let read = || -> Option<serde_json::Value> {
         serde_json::from_slice(&std::fs::read(&path).ok()?).ok()
     };
-    if let Some(table) = read() {
-        let same = table.get("seeds").and_then(|v| v.as_u64()) == Some(args.seeds)
-            && table.get("tasks").and_then(|v| v.as_u64()) == Some(tasks as u64);
-        if same {
+    // Reused only when it evaluated these very policies (their saved iterations), seeds and tasks.
+    if crate::eval_cmd::table_is_current(
+        &out,
+        &row.policy,
+        row.teacher1.as_deref(),
+        args.seeds,
+        Some(tasks),
+    ) {
+        if let Some(table) = read() {
             println!("{} on {split}: reusing {}", row.name, path.display());
             return Ok(table);
         }
@@ -352,9 +357,11 @@ pub fn run(args: TablesArgs) -> Result<()> {
         let mut made_by = String::new();
         for row in &rows {
             made_by.push_str(&format!(
-                "- {}: `{}`{}, {}\n",
+                "- {}: `{}` (saved at iteration {}){}, {}\n",
                 row.name,
                 row.policy.display(),
+                crate::eval_cmd::policy_iteration(&row.policy)
+                    .map_or("?".into(), |i| i.to_string()),
                 row.teacher1
                     .as_ref()
                     .map(|t| format!(" after `{}` on each first cycle", t.display()))

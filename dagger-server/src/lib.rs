@@ -77,7 +77,8 @@ pub fn answer(bytes: &[u8], teachers: &Teachers) -> LabelReply {
             return fail(
                 req.request_id,
                 format!(
-                    "no {} weights have been published yet",
+                    "{}: no {} weights have been published",
+                    lhm_protos::LABEL_ERROR_NO_WEIGHTS,
                     lhm_protos::keys::role_chunk(role)
                 ),
             );

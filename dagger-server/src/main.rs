@@ -11,8 +11,8 @@ struct Args {
     /// The learner's (or a router's) endpoint.
     #[arg(long, required = true)]
     connect: Vec<String>,
-    /// The run whose teachers label the student's states.
-    #[arg(long, default_value = "teacher1")]
+    /// The student run whose teachers label its states (`lhm train --stage student`'s default).
+    #[arg(long, default_value = "student")]
     run_id: String,
     /// A Zenoh JSON5 configuration (TLS, authentication); explicit endpoints override its own.
     #[arg(long)]

@@ -21,6 +21,10 @@ pub use prost;
 /// The `schema_version` this build writes and accepts. Bump it on any incompatible change.
 pub const SCHEMA_VERSION: u32 = 1;
 
+/// How `LabelReply.error` begins while a supervising teacher's weights have not reached the
+/// dagger-server yet: the one error a student waits out (any other is final).
+pub const LABEL_ERROR_NO_WEIGHTS: &str = "no teacher weights yet";
+
 /// Encoded `google.protobuf.FileDescriptorSet` of `lhm/v1/lhm.proto` (with imports and comments),
 /// e.g. the schema data of MCAP channels that carry these messages.
 pub const FILE_DESCRIPTOR_SET: &[u8] =

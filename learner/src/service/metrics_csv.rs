@@ -54,14 +54,34 @@ pub struct MetricsCsv {
 }
 
 impl MetricsCsv {
-    /// Opens `path` for appending. A file whose header is not [`COLUMNS`] (an older layout) is
-    /// kept as `<path>.old` (never overwritten: `.old.2`, … ) and a new one started.
+    /// Opens `path` for appending. A file whose header is a prefix of [`COLUMNS`] (written before
+    /// columns were added at the end) is brought to the new layout in place, its rows padded with
+    /// empty fields (written to a temporary file and renamed, so a crash leaves one or the other);
+    /// any other header (an older layout) is kept as `<path>.old` (never overwritten: `.old.2`,
+    /// … ) and a new file started.
     pub fn open(path: &Path) -> std::io::Result<Self> {
         let header = COLUMNS.join(",");
         if let Ok(f) = File::open(path) {
             let mut first = String::new();
             BufReader::new(f).read_line(&mut first)?;
-            if !first.is_empty() && first.trim_end() != header {
+            let old = first.trim_end();
+            let old_columns: Vec<&str> = old.split(',').collect();
+            let is_prefix = !old.is_empty()
+                && old_columns.len() < COLUMNS.len()
+                && COLUMNS[..old_columns.len()] == old_columns[..];
+            if is_prefix {
+                let text = std::fs::read_to_string(path)?;
+                let mut out = format!("{header}\n");
+                for line in text.lines().skip(1).filter(|l| !l.is_empty()) {
+                    let fields = line.split(',').count();
+                    out.push_str(line);
+                    out.push_str(&",".repeat(COLUMNS.len().saturating_sub(fields)));
+                    out.push('\n');
+                }
+                let tmp = path.with_extension("csv.tmp");
+                std::fs::write(&tmp, out)?;
+                std::fs::rename(&tmp, path)?;
+            } else if !old.is_empty() && old != header {
                 let keep = (1u32..)
                     .map(|k| {
                         let suffix = if k == 1 {
@@ -111,6 +131,25 @@ impl MetricsCsv {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_file_missing_the_last_columns_is_padded_in_place() {
+        let dir = std::env::temp_dir().join(format!("lhm-metrics-pad-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("metrics.csv");
+        let old = &COLUMNS[..COLUMNS.len() - 3];
+        std::fs::write(&path, format!("{}\n1,2\n", old.join(","))).unwrap();
+        let mut csv = MetricsCsv::open(&path).unwrap();
+        csv.append(&[("iteration", 2.0)]).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], COLUMNS.join(","));
+        assert_eq!(lines[1].split(',').count(), COLUMNS.len());
+        assert!(lines[1].starts_with("1,2,"));
+        assert!(lines[2].starts_with("2,"));
+        assert!(!path.with_extension("csv.old").exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn rows_append_across_reopens_and_an_old_layout_is_kept_aside() {

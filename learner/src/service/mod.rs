@@ -432,6 +432,28 @@ fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<(), ServiceE
     std::fs::rename(&tmp, path).map_err(io)
 }
 
+/// A run directory whose `config.toml` names another role (e.g. `lhm train --stage student` into
+/// a Teacher 1 run's directory) is refused before anything in it is touched: resuming would train
+/// one role's checkpoint as another's.
+fn refuse_another_role(config: &TrainConfig, run_dir: &Path) -> Result<(), ServiceError> {
+    let path = run_dir.join(RUN_CONFIG_FILE);
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(());
+    };
+    let saved = text
+        .parse::<toml::Table>()
+        .ok()
+        .and_then(|t| t.get("role").and_then(|r| r.as_str()).map(str::to_owned));
+    match saved {
+        Some(role) if role != config.role => Err(ServiceError::Config(format!(
+            "{} holds a {role} run; this is a {} run: give it another --run-id",
+            run_dir.display(),
+            config.role
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// The checkpoint stem of a run: `<run_dir>/checkpoint.{safetensors,json}`.
 /// Copies the policy, value function and normalisers of the checkpoint at `path` into a fresh
 /// learner; a different network layout is an error naming the file and the tensor.
@@ -523,6 +545,14 @@ fn load_teachers(config: &TrainConfig, role: Role) -> Result<Vec<(Role, Learner)
     Ok(teachers)
 }
 
+/// A frozen teacher on its policy key: the queryable that answers for it, and the message to put
+/// again whenever a process (re)joins (a dagger-server that missed both would label nothing).
+struct ServedTeacher {
+    _queryable: zenoh::query::Queryable<()>,
+    key: String,
+    bytes: Vec<u8>,
+}
+
 /// Answers queries on the run's `role` policy key with the frozen `teacher`'s weights, and puts
 /// them once for subscribers already listening.
 fn serve_teacher(
@@ -531,7 +561,7 @@ fn serve_teacher(
     spec: &RunSpec,
     role: Role,
     teacher: &Learner,
-) -> Result<zenoh::query::Queryable<()>, ServiceError> {
+) -> Result<ServedTeacher, ServiceError> {
     // The teacher's own network settings (its sizes or noise may differ from this run's).
     let teacher_spec = RunSpec {
         actor_critic: teacher.actor_critic.config.clone(),
@@ -548,15 +578,21 @@ fn serve_teacher(
     .map_err(lhm_cluster::ClusterError::from)?;
     let key = keys::policy(&config.run_id, role);
     session.put(&key, bytes.clone()).wait().map_err(zerr)?;
-    session
-        .declare_queryable(key)
+    let answer = bytes.clone();
+    let queryable = session
+        .declare_queryable(&key)
         .callback(move |query| {
-            if let Err(e) = query.reply(query.key_expr().clone(), bytes.clone()).wait() {
+            if let Err(e) = query.reply(query.key_expr().clone(), answer.clone()).wait() {
                 tracing::warn!("answering a teacher weights query: {e}");
             }
         })
         .wait()
-        .map_err(zerr)
+        .map_err(zerr)?;
+    Ok(ServedTeacher {
+        _queryable: queryable,
+        key,
+        bytes,
+    })
 }
 
 pub fn checkpoint_stem(run_dir: &Path) -> PathBuf {
@@ -686,6 +722,7 @@ pub fn run_learner(
         path: run_dir.clone(),
         source,
     })?;
+    refuse_another_role(config, &run_dir)?;
     config.write_run_config(&run_dir)?;
     let stem = checkpoint_stem(&run_dir);
     let learner_config = config.learner_config();
@@ -713,7 +750,7 @@ pub fn run_learner(
     spec.teacher_mix = optimiser.teacher_mix(learner.counters.iteration);
 
     let session = lhm_cluster::open_session(NodeMode::Router, endpoints)?;
-    let _teacher_queryables = teachers
+    let served_teachers = teachers
         .iter()
         .map(|(role, t)| serve_teacher(&session, config, &spec, *role, t))
         .collect::<Result<Vec<_>, _>>()?;
@@ -836,6 +873,9 @@ pub fn run_learner(
         if republish && last_republish.elapsed() >= Duration::from_millis(500) {
             let bytes = latest.lock().map(|b| b.clone()).unwrap_or_default();
             weights_pub.put(bytes).wait().map_err(zerr)?;
+            for t in &served_teachers {
+                session.put(&t.key, t.bytes.clone()).wait().map_err(zerr)?;
+            }
             republish = false;
             last_republish = Instant::now();
         }
@@ -1152,6 +1192,28 @@ mod tests {
             .map(|(r, _)| r)
             .collect();
         assert_eq!(roles, vec![Role::Teacher1, Role::Teacher2]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A run directory made by another role is refused before anything in it changes.
+    #[test]
+    fn a_run_directory_of_another_role_is_refused() {
+        let dir = std::env::temp_dir().join(format!("lhm-role-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let teacher = TrainConfig::default();
+        teacher.write_run_config(&dir).unwrap();
+        let before = std::fs::read_to_string(dir.join(RUN_CONFIG_FILE)).unwrap();
+        refuse_another_role(&teacher, &dir).unwrap();
+        let student = TrainConfig {
+            role: "student".into(),
+            ..TrainConfig::default()
+        };
+        let e = refuse_another_role(&student, &dir).unwrap_err().to_string();
+        assert!(e.contains("teacher1 run") && e.contains("--run-id"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(dir.join(RUN_CONFIG_FILE)).unwrap(),
+            before
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

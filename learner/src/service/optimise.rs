@@ -1,7 +1,7 @@
 //! What the learner optimises on one batch of accepted chunks: the service's seam between the
-//! stages. The teachers (t1, t1-rr, t2) run PPO on the task reward plus AMP's style reward; the
-//! student aggregates the chunks' (state, teacher label) rows into the DAgger dataset and
-//! regresses onto all of it. Everything else — intake, weights, checkpoints, status — is the one
+//! stages. The teachers (t1, t1-rr, t2) and the baselines' one policy run PPO on the task reward
+//! plus AMP's style reward; the student aggregates the chunks' (state, teacher label) rows into
+//! the DAgger dataset and regresses onto rows drawn from all of it. Everything else — intake, weights, checkpoints, status — is the one
 //! service loop.
 
 use std::path::Path;
@@ -74,7 +74,8 @@ impl Optimiser {
         Ok(Self::Dagger(Box::new(DaggerRounds {
             trainer: StudentTrainer::new(config.regression.clone(), ac)?,
             dataset,
-            // Each process's shuffles differ from the last one's (resumed runs included).
+            // Seeded by the iteration it starts at: a resumed run draws other rows than its first
+            // session did (two processes resuming the same checkpoint draw the same).
             rng: SplitMix64::new(learner.counters.iteration ^ 0x5eed_da66),
             config: config.clone(),
         })))
