@@ -265,13 +265,17 @@ fn y_range(values: &[f64]) -> (f64, f64) {
     if lo > hi {
         return (0.0, 1.0);
     }
-    if lo >= 0.0 && hi <= 1.0 {
+    // Fractions on the whole unit range, unless all are small (a regression loss of 1e-4 would
+    // draw as a flat line at 0).
+    if lo >= 0.0 && hi <= 1.0 && hi >= 0.2 {
         return (-0.02, 1.02);
     }
     let pad = if hi > lo {
         0.05 * (hi - lo)
+    } else if lo == 0.0 {
+        0.1
     } else {
-        0.1 * lo.abs().max(1.0)
+        0.1 * lo.abs()
     };
     (lo - pad, hi + pad)
 }
