@@ -92,6 +92,9 @@ pub struct EvalSetup<'a> {
     pub sim: &'a SimConfig,
     pub env: &'a EnvConfig,
     pub batch: usize,
+    /// A VLA policy hears each cycle's instruction; `false` blanks it (the no-language
+    /// ablation). State-based policies ignore it.
+    pub language: bool,
 }
 
 impl EvalSetup<'_> {
@@ -171,6 +174,15 @@ pub fn evaluate<'a>(
             other.act_dim()
         )));
     }
+    // What each policy sees: a VLA its image-and-instruction rows, the others the state.
+    let views: Vec<Option<lhm_sim::vla::VlaView>> = policies
+        .iter()
+        .map(|ac| {
+            ac.policy
+                .encoder()
+                .map(|e| crate::rollout::vla_view(e.config(), setup.language))
+        })
+        .collect();
     let mut out = Vec::with_capacity(jobs.len());
     for chunk in jobs.chunks(batch.max(1)) {
         let mut slots: Vec<Slot> = chunk
@@ -199,9 +211,10 @@ pub fn evaluate<'a>(
                 if acting.is_empty() {
                     continue;
                 }
+                let view = views[p].as_ref();
                 let obs: Vec<f32> = acting
                     .par_iter()
-                    .map(|&i| slots[i].env.observation())
+                    .map(|&i| crate::rollout::observe(view, &slots[i].env))
                     .collect::<Vec<_>>()
                     .concat();
                 let actions = ac.act_deterministic(&obs)?;
@@ -492,6 +505,7 @@ mod tests {
                 sim: &sim,
                 env: &env,
                 batch: 3,
+                language: true,
             };
             evaluate(&ac, &setup, &jobs, &|n| {
                 seen.store(n, std::sync::atomic::Ordering::Relaxed)
@@ -541,6 +555,7 @@ mod tests {
             sim: &sim,
             env: &env,
             batch: 2,
+            language: true,
         };
         let run = |p: EvalPolicy, jobs: &[(Task, u64)]| evaluate(p, &setup, jobs, &|_| {}).unwrap();
         let teachers = EvalPolicy::Teachers {

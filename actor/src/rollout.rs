@@ -21,6 +21,11 @@
 //! objects in the student stage) reset-free through every cycle; every state is labelled by the teachers through a [`Labeller`] (first cycle:
 //! Teacher 1, later cycles: Teacher 2), a step executes the teachers' action with probability β
 //! and the student's mean action otherwise, and the chunks carry the labels as actions.
+//!
+//! The VLA student (role `vla`, a policy with a VLA encoder) is the same DAgger rollout with
+//! another view: the policy and the chunks see [`VlaView`] rows (egocentric image,
+//! proprioception, the current cycle's instruction), while the labeller is asked about the
+//! privileged state observation of the very same state.
 
 use lhm_nets::{ActorCritic, SplitMix64};
 use lhm_protos::{EpisodeStats, Role, Stage, TrajectoryChunk, WireMessage};
@@ -28,6 +33,7 @@ use lhm_scenes::{Benchmark, Catalogue, Task};
 use lhm_sim::env::TaskEnv;
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::task::cycles::Handoff;
+use lhm_sim::vla::{VlaLayout, VlaView, Vocabulary};
 use lhm_sim::CharacterModel;
 
 use lhm_cluster::RunSpec;
@@ -68,6 +74,38 @@ pub enum Behaviour<'a> {
         labeller: &'a mut dyn Labeller,
         teacher_mix: f32,
     },
+}
+
+/// What a VLA policy with this encoder sees (`language: false` blanks the instruction).
+pub fn vla_view(encoder: &lhm_nets::VlaEncoderConfig, language: bool) -> VlaView {
+    VlaView {
+        layout: VlaLayout {
+            proprio_dim: encoder.proprio_dim,
+            max_tokens: encoder.max_tokens,
+            image_size: encoder.image_size,
+        },
+        vocabulary: Vocabulary {
+            words: encoder.vocabulary.clone(),
+        },
+        language,
+    }
+}
+
+/// The observation row a policy reads: its VLA view, or the state observation.
+pub fn observe(view: Option<&VlaView>, env: &TaskEnv) -> Vec<f32> {
+    match view {
+        Some(view) => view.observation(env),
+        None => env.observation(),
+    }
+}
+
+/// The row `ac` reads in `env`'s current state: the VLA view for a VLA policy (the instruction
+/// blanked unless `language`), else the state observation.
+pub fn policy_observation(ac: &ActorCritic, env: &TaskEnv, language: bool) -> Vec<f32> {
+    match ac.policy.encoder() {
+        Some(e) => vla_view(e.config(), language).observation(env),
+        None => env.observation(),
+    }
 }
 
 /// The supervising teacher's stage of a state: the episode's first cycle or a later one.
@@ -190,6 +228,8 @@ pub struct Rollout {
     pub teacher1_steps: u64,
     /// Teacher 1 episodes dropped because they did not hand off.
     pub teacher1_failures: u64,
+    /// The VLA student's view (from the run's policy config); `None`: the state observation.
+    view: Option<VlaView>,
 }
 
 impl Rollout {
@@ -249,7 +289,24 @@ impl Rollout {
             }
             _ => {}
         }
-        let obs_dim = TaskEnv::obs_dim(&model, &spec.env);
+        let view = spec
+            .actor_critic
+            .policy
+            .vla
+            .as_ref()
+            .map(|encoder| vla_view(encoder, true));
+        if let Some(view) = &view {
+            if view.layout.proprio_dim != lhm_sim::obs::proprioception_dim(&model) {
+                return Err(RolloutError::Spec(format!(
+                    "the VLA reads {} proprioception values, the character gives {}",
+                    view.layout.proprio_dim,
+                    lhm_sim::obs::proprioception_dim(&model)
+                )));
+            }
+        }
+        let obs_dim = view
+            .as_ref()
+            .map_or(TaskEnv::obs_dim(&model, &spec.env), |v| v.layout.dim());
         let amp_dim = TaskEnv::amp_dim(&model, &spec.env);
         if obs_dim != spec.obs_dim {
             return Err(RolloutError::Spec(format!(
@@ -305,10 +362,11 @@ impl Rollout {
             teacher1,
             teacher1_steps: 0,
             teacher1_failures: 0,
+            view,
         };
         for _ in 0..num_envs.max(1) {
             let env = rollout.fresh_env()?;
-            let obs = env.observation();
+            let obs = observe(rollout.view.as_ref(), &env);
             rollout.slots.push(Slot {
                 env,
                 obs,
@@ -448,7 +506,21 @@ impl Rollout {
                 let n = self.slots.len();
                 let act_dim = self.spec.act_dim;
                 let stages: Vec<Stage> = self.slots.iter().map(|s| label_stage(&s.env)).collect();
-                let labels = labeller.label(obs, &stages).map_err(RolloutError::Labels)?;
+                // The labeller reads the privileged state even when the policy sees images.
+                let privileged: Vec<f32>;
+                let label_obs = if self.view.is_some() {
+                    privileged = self
+                        .slots
+                        .iter()
+                        .flat_map(|s| s.env.observation())
+                        .collect();
+                    &privileged
+                } else {
+                    obs
+                };
+                let labels = labeller
+                    .label(label_obs, &stages)
+                    .map_err(RolloutError::Labels)?;
                 if labels.len() != n * act_dim {
                     return Err(RolloutError::Labels(format!(
                         "{} label values for {n} states of {act_dim} actions",
@@ -541,7 +613,7 @@ impl Rollout {
                     reward_terms: std::mem::take(&mut slot.episode_terms),
                 };
                 if result.truncated && !result.physics_invalid {
-                    truncated_obs.push((i, slot.env.observation()));
+                    truncated_obs.push((i, observe(self.view.as_ref(), &slot.env)));
                 }
                 slot.buf.episodes.push(stats.clone());
                 if i == 0 {
@@ -553,7 +625,7 @@ impl Rollout {
                 }
                 out.finished.push((i, stats));
             } else {
-                slot.obs = slot.env.observation();
+                slot.obs = observe(self.view.as_ref(), &slot.env);
             }
         }
         let critic = match &behaviour {
@@ -575,7 +647,7 @@ impl Rollout {
         for i in ended {
             let env = self.fresh_env()?;
             let slot = &mut self.slots[i];
-            slot.obs = env.observation();
+            slot.obs = observe(self.view.as_ref(), &env);
             slot.env = env;
             slot.episode_return = 0.0;
             slot.episode_len = 0;

@@ -294,9 +294,10 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
     let mut last_metrics = Instant::now();
     let mut steps_at_metrics = 0u64;
     let mut learner = LearnerWatch::new(&session, &config.run_id)?;
-    // A student acts on its own weights, mixed with the teachers', and sends their labels.
-    let mut labels =
-        (config.role == Role::Student).then(|| DaggerLabels::new(&session, &config.run_id));
+    // A student (and the VLA student) acts on its own weights, mixed with its labeller's, and
+    // sends the labels.
+    let mut labels = matches!(config.role, Role::Student | Role::Vla)
+        .then(|| DaggerLabels::new(&session, &config.run_id));
     loop {
         // A stop request between steps drops the unfinished chunk: nothing partial is sent.
         if shutdown::requested() {

@@ -114,6 +114,23 @@ enum BenchCommand {
         #[arg(long, default_value_t = 7)]
         repetitions: usize,
     },
+    /// The VLA's eyes on one core, per image size: env steps/s with the state observation vs
+    /// with the VLA row (egocentric render + instruction), renders/s, the VLA policy's forward
+    /// rows/s (batches of 16), and the bytes a step adds to a chunk.
+    Vla {
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+        /// Image sides to measure.
+        #[arg(long, default_values_t = [48usize, 64, 96])]
+        sizes: Vec<usize>,
+        /// Control steps (and renders) per timed repetition.
+        #[arg(long, default_value_t = 200)]
+        steps: usize,
+        /// Timed repetitions; the report gives their median.
+        #[arg(long, default_value_t = 3)]
+        repetitions: usize,
+    },
     /// Distributed layer: actor env steps/s with and without publishing, one vs two actor
     /// processes, and weight-broadcast latency (p50/p99) of the default network.
     Cluster {
@@ -139,6 +156,33 @@ pub fn run(args: BenchArgs) -> Result<()> {
             states,
             repetitions,
         } => bench_labels(json, &states, repetitions),
+        BenchCommand::Vla {
+            json,
+            sizes,
+            steps,
+            repetitions,
+        } => {
+            let rows = crate::vla_bench::run(&sizes, steps, repetitions)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&rows)?);
+            } else {
+                println!(
+                    "| image | env steps/s (state obs) | env steps/s (VLA row) | renders/s | VLA forward rows/s | bytes/step |\n|---|---|---|---|---|---|"
+                );
+                for r in rows {
+                    println!(
+                        "| {0}x{0} | {1:.0} | {2:.0} | {3:.0} | {4:.0} | {5} |",
+                        r.image_size,
+                        r.state_steps_per_s,
+                        r.vla_steps_per_s,
+                        r.renders_per_s,
+                        r.policy_rows_per_s,
+                        r.row_bytes
+                    );
+                }
+            }
+            Ok(())
+        }
         BenchCommand::Env {
             json,
             task,

@@ -52,7 +52,9 @@ pub struct LearnerOpts {
     /// Run one stage of the paper's pipeline: `t1` (Teacher 1 pretraining), `t1-rr`
     /// (release-and-retreat fine-tuning; needs --init-from the t1 policy), `t2` (Teacher 2; needs
     /// --teacher1, and starts from that policy's weights unless --init-from says otherwise),
-    /// `student` (DAgger distillation; needs --teacher1 and --teacher2).
+    /// `student` (DAgger distillation; needs --teacher1 and --teacher2), `vla` (the student
+    /// distilled into an egocentric-RGB and language policy; needs --teacher1 the student's
+    /// policy), or the baselines' `e2e` and `curriculum`.
     #[arg(long)]
     stage: Option<String>,
     /// Where `scripts/install-motions` put the clips (default: $LHM_MOTION_DIR or ~/.cache/lhm/motions).
@@ -374,9 +376,10 @@ pub(crate) fn train_locally(
     let run_id = config.run_id.clone();
     let scenes = config.scenes.clone();
     let result = run_with_progress(&config, &endpoints, demo, || {
-        // The student's labels come from a dagger-server; the teachers' runs need none.
+        // The student's (and the VLA's) labels come from a dagger-server; the teachers' runs
+        // need none.
         let mut processes: Vec<(String, Vec<String>)> = Vec::new();
-        if role == "student" {
+        if role == "student" || role == "vla" {
             processes.push((
                 "dagger-server".into(),
                 ["dagger-server", "--connect", &endpoint, "--run-id", &run_id]
@@ -533,7 +536,7 @@ pub fn actor(args: ActorArgs) -> Result<()> {
     shutdown::install();
     let Some(role) = keys::parse_role(&args.role) else {
         bail!(
-            "--role {:?} is not one of teacher1, teacher2, student",
+            "--role {:?} is not one of teacher1, teacher2, student, vla",
             args.role
         );
     };

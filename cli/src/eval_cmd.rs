@@ -51,6 +51,10 @@ pub struct EvalArgs {
     /// episode ends; 10 fps) into the --output directory, named `<task>-s<seed>.gif`.
     #[arg(long, default_value_t = 0)]
     pub(crate) gifs: usize,
+    /// A VLA policy runs with every instruction blanked (the paper's language ablation); an
+    /// error for a state-based policy, which hears no instruction.
+    #[arg(long)]
+    pub(crate) no_language: bool,
     #[command(flatten)]
     pub(crate) scenes: crate::scenes_cmd::Source,
 }
@@ -117,6 +121,12 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let model = CharacterModel::amp_humanoid();
     let train = crate::render_cmd::train_config_for(Some(&a.policy), a.config.as_deref())?;
     let learner = crate::render_cmd::load_policy(&a.policy, &train, &model)?;
+    if a.no_language && learner.actor_critic.policy.encoder().is_none() {
+        bail!(
+            "--no-language: {} is not a VLA policy (it reads the state, not an instruction)",
+            a.policy.display()
+        );
+    }
     let teacher1 = match &a.teacher1 {
         Some(path) => {
             let t1_config = crate::render_cmd::train_config_for(Some(path), None)?;
@@ -162,6 +172,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         sim: &train.sim,
         env: &train.env,
         batch: a.batch,
+        language: !a.no_language,
     };
     let episodes = evaluate(policy, &setup, &jobs, &|done| {
         bar.set_position(done as u64);
@@ -230,7 +241,13 @@ pub fn run(a: EvalArgs) -> Result<()> {
                         Some(t1) if env.cycles.current == 0 => &t1.actor_critic,
                         _ => &learner.actor_critic,
                     };
-                    Ok(ac.act_deterministic(&env.observation())?)
+                    Ok(
+                        ac.act_deterministic(&lhm_actor::rollout::policy_observation(
+                            ac,
+                            env,
+                            !a.no_language,
+                        ))?,
+                    )
                 },
                 &mut || {},
             )?;

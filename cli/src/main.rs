@@ -14,6 +14,7 @@ mod render_cmd;
 mod scenes_cmd;
 mod tables_cmd;
 mod train_bench;
+mod vla_bench;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;

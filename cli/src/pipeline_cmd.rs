@@ -188,6 +188,8 @@ impl PipelineConfig {
                     .then_some("a Teacher 1 stage (t1 or t1-rr) before it"),
                 Stage::Student => (!seen.contains(&Stage::T2))
                     .then_some("a t2 stage (and a Teacher 1 stage) before it"),
+                Stage::Vla => (!seen.contains(&Stage::Student))
+                    .then_some("a student stage before it (the VLA is distilled from it)"),
                 Stage::E2e => (!seen.is_empty())
                     .then_some("to be the only stage (it trains one policy from scratch)"),
                 Stage::Curriculum => (!seen.iter().any(|s| matches!(s, Stage::T1 | Stage::T1Rr)))
@@ -285,6 +287,7 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
     let mut teacher1: Option<PathBuf> = None;
     let mut teacher2: Option<PathBuf> = None;
     let mut student: Option<PathBuf> = None;
+    let mut vla: Option<PathBuf> = None;
     // A baseline's one policy for every cycle (e2e, curriculum).
     let mut single: Option<PathBuf> = None;
     let mut upstream_trained = false;
@@ -312,7 +315,13 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
         } else {
             None
         };
-        stage.apply(&mut train, teacher1.as_deref(), labeller2)?;
+        // The VLA's labeller is the unified student.
+        let labeller1 = if *stage == Stage::Vla {
+            student.as_deref()
+        } else {
+            teacher1.as_deref()
+        };
+        stage.apply(&mut train, labeller1, labeller2)?;
         train.check()?;
         let dir = train.run_dir();
         let done = iterations_done(&dir)?;
@@ -365,6 +374,7 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
             Stage::T1 | Stage::T1Rr => teacher1 = policy,
             Stage::T2 => teacher2 = policy,
             Stage::Student => student = policy,
+            Stage::Vla => vla = policy,
             Stage::E2e | Stage::Curriculum => single = policy,
         }
     }
@@ -372,6 +382,7 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
         teacher1: teacher1.as_deref(),
         teacher2: teacher2.as_deref(),
         student: student.as_deref(),
+        vla: vla.as_deref(),
         single: single.as_deref(),
     };
     evaluate(&config, &root, &policies, &args.scenes)?;
@@ -450,6 +461,7 @@ pub(crate) struct Policies<'a> {
     pub teacher1: Option<&'a Path>,
     pub teacher2: Option<&'a Path>,
     pub student: Option<&'a Path>,
+    pub vla: Option<&'a Path>,
     pub single: Option<&'a Path>,
 }
 
@@ -460,6 +472,8 @@ pub(crate) struct EvalRow<'a> {
     pub policy: &'a Path,
     pub teacher1: Option<&'a Path>,
     pub first_pair: bool,
+    /// A VLA row with its instructions blanked (the language ablation).
+    pub no_language: bool,
 }
 
 impl<'a> Policies<'a> {
@@ -473,6 +487,7 @@ impl<'a> Policies<'a> {
                 policy: t1,
                 teacher1: None,
                 first_pair: true,
+                no_language: false,
             });
             if let Some(t2) = self.teacher2 {
                 rows.push(EvalRow {
@@ -480,6 +495,7 @@ impl<'a> Policies<'a> {
                     policy: t2,
                     teacher1: Some(t1),
                     first_pair: false,
+                    no_language: false,
                 });
             }
         }
@@ -489,7 +505,23 @@ impl<'a> Policies<'a> {
                 policy: s,
                 teacher1: None,
                 first_pair: false,
+                no_language: false,
             });
+        }
+        if let Some(v) = self.vla {
+            for no_language in [false, true] {
+                rows.push(EvalRow {
+                    name: if no_language {
+                        "vla-no-language"
+                    } else {
+                        "vla"
+                    },
+                    policy: v,
+                    teacher1: None,
+                    first_pair: false,
+                    no_language,
+                });
+            }
         }
         if let Some(p) = self.single {
             rows.push(EvalRow {
@@ -497,6 +529,7 @@ impl<'a> Policies<'a> {
                 policy: p,
                 teacher1: None,
                 first_pair: false,
+                no_language: false,
             });
         }
         rows
@@ -552,6 +585,7 @@ fn evaluate(
                 output: Some(out),
                 batch: 64,
                 gifs: 0,
+                no_language: row.no_language,
                 scenes: scenes.clone(),
             })
             .with_context(|| format!("eval {split} {}", row.name))?;
@@ -577,7 +611,7 @@ mod tests {
         );
         let smoke = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/pipeline-smoke.toml");
         let c = PipelineConfig::from_toml_file(&smoke).unwrap();
-        assert_eq!(c.stages.len(), 4);
+        assert_eq!(c.stages.len(), 5);
         assert!(c
             .stages
             .iter()

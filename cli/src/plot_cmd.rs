@@ -267,7 +267,7 @@ fn y_range(values: &[f64]) -> (f64, f64) {
     }
     // Fractions on the whole unit range, unless all are small (a regression loss of 1e-4 would
     // draw as a flat line at 0).
-    if lo >= 0.0 && hi <= 1.0 && hi >= 0.2 {
+    if lo >= 0.0 && (0.2..=1.0).contains(&hi) {
         return (-0.02, 1.02);
     }
     let pad = if hi > lo {

@@ -86,7 +86,7 @@ pub fn run(args: RecordArgs) -> Result<()> {
     let bar = ProgressBar::new(u64::from(config.env.max_episode_steps));
     let (mut ret, mut len) = (0f32, 0u32);
     let last = loop {
-        let obs = env.observation();
+        let obs = lhm_actor::rollout::policy_observation(ac, &env, true);
         let action = if args.stochastic {
             ac.act(&obs, &mut rng)?.actions
         } else {

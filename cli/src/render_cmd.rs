@@ -184,7 +184,7 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
                     .map(|_| rng.range(-1.0, 1.0) as f32)
                     .collect(),
                 Policy::Trained(l) => {
-                    let obs = env.observation();
+                    let obs = lhm_actor::rollout::policy_observation(&l.actor_critic, env, true);
                     if a.stochastic {
                         l.actor_critic.act(&obs, &mut net_rng)?.actions
                     } else {
@@ -325,7 +325,22 @@ pub(crate) fn load_policy(
         learner.actor_critic.obs_dim(),
         learner.actor_critic.act_dim(),
     );
-    let want = TaskEnv::obs_dim(model, &train.env);
+    // A VLA policy reads its own rows; every other policy the state observation.
+    let want = match learner.actor_critic.policy.encoder() {
+        Some(e) => {
+            let proprio = lhm_sim::obs::proprioception_dim(model);
+            if e.config().proprio_dim != proprio {
+                bail!(
+                    "{}: its VLA encoder reads {} proprioception values, this character gives \
+                     {proprio}",
+                    stem.display(),
+                    e.config().proprio_dim
+                );
+            }
+            e.obs_dim()
+        }
+        None => TaskEnv::obs_dim(model, &train.env),
+    };
     if obs != want || act != model.dofs.len() {
         bail!(
             "{} takes {obs} observations and gives {act} actions; this environment has \

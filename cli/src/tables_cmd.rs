@@ -151,6 +151,8 @@ fn rows_of(dir: &Path, manifest: &Manifest) -> Vec<OurRow> {
         teacher1: teacher1.as_deref(),
         teacher2: teacher2.as_deref(),
         student: student.as_deref(),
+        // The VLA's rows belong to Table 3, not to these.
+        vla: None,
         single: single.as_deref(),
     };
     let label = &manifest.label;
@@ -237,6 +239,7 @@ fn evaluation(
         output: Some(out),
         batch: 64,
         gifs: 0,
+        no_language: false,
         scenes: args.scenes.clone(),
     })
     .with_context(|| format!("{} on {split}", row.name))?;

@@ -74,7 +74,7 @@ pub fn decode_policy(bytes: &[u8]) -> ClusterResult<ReceivedPolicy> {
     ac.load_weights_safetensors(&msg.safetensors)?;
     match (&ac.obs_norm, &json.obs_norm) {
         (None, None) => {}
-        (Some(_), Some(norm)) if norm.dim() == spec.obs_dim => ac.obs_norm = Some(norm.clone()),
+        (Some(own), Some(norm)) if norm.dim() == own.dim() => ac.obs_norm = Some(norm.clone()),
         _ => {
             return Err(ClusterError::Weights(
                 "config_json: observation normaliser missing or of the wrong width".into(),

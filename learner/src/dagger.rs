@@ -379,12 +379,12 @@ impl StudentTrainer {
             return Err(LearnerError::Invalid("the DAgger dataset is empty".into()));
         }
         let newest = newest_round_rows.clamp(1, data.len());
-        if let Some(norm) = &mut student.obs_norm {
+        if student.obs_norm.is_some() {
             let (obs, _) = gather(
                 data,
                 &((data.len() - newest)..data.len()).collect::<Vec<_>>(),
             );
-            norm.update(&obs)?;
+            student.update_obs_norm(&obs)?;
         }
         let probe: Vec<usize> = if data.len() <= LOSS_ROWS {
             (0..data.len()).collect()

@@ -165,7 +165,7 @@ impl PpoTrainer {
         let clipped = (ratio.clamp(1.0 - c.clip_ratio, 1.0 + c.clip_ratio)? * &mb.advantages)?;
         let policy = surrogate.minimum(&clipped)?.mean_all()?.neg()?;
 
-        let values = ac.value.forward(&mb.obs)?;
+        let values = ac.value_outputs(&mb.obs)?;
         let error = (&values - &mb.returns)?.sqr()?;
         let value_error = match c.value_clip {
             Some(clip) => {
@@ -226,10 +226,7 @@ impl PpoTrainer {
         check_len("returns", batch.returns.len(), n)?;
         let mb_size = self.config.minibatch_size.clamp(1, n);
 
-        let obs = match &ac.obs_norm {
-            Some(norm) => norm.normalize(&batch.obs)?,
-            None => batch.obs.clone(),
-        };
+        let obs = ac.input_rows(&batch.obs)?;
         // With a value normaliser the critic learns standardised returns; its statistics take
         // this batch's returns in first, so the targets are on the scale it will be read at.
         if let Some(norm) = &mut ac.value_norm {
@@ -287,9 +284,7 @@ impl PpoTrainer {
                 self.adam.config.lr = adapt_lr(self.adam.config.lr, epoch_kl, target);
             }
         }
-        if let Some(norm) = &mut ac.obs_norm {
-            norm.update(&batch.obs)?;
-        }
+        ac.update_obs_norm(&batch.obs)?;
         let k = sums.minibatches as f64;
         Ok(PpoStats {
             policy_loss: sums.policy_loss / k,

@@ -68,8 +68,17 @@ impl ActorCritic {
     pub fn new(obs_dim: usize, act_dim: usize, config: &ActorCriticConfig) -> NetResult<Self> {
         let mut rng = SplitMix64::new(config.init_seed);
         let policy = GaussianPolicy::new(obs_dim, act_dim, &config.policy, &mut rng, DType::F32)?;
-        let value = ValueNet::new(obs_dim, &config.value, &mut rng, DType::F32)?;
-        let obs_norm = config.normalize_obs.then(|| RunningMeanStd::new(obs_dim));
+        // The VLA student is trained by regression alone; its critic (kept so every policy has
+        // one layout) reads the proprioception only, instead of tens of thousands of pixels.
+        let normalized_dim = config
+            .policy
+            .vla
+            .as_ref()
+            .map_or(obs_dim, |v| v.proprio_dim);
+        let value = ValueNet::new(normalized_dim, &config.value, &mut rng, DType::F32)?;
+        let obs_norm = config
+            .normalize_obs
+            .then(|| RunningMeanStd::new(normalized_dim));
         let value_norm = config.normalize_value.then(|| RunningMeanStd::new(1));
         Ok(Self {
             config: config.clone(),
@@ -114,11 +123,76 @@ impl ActorCritic {
         self.policy.act_dim()
     }
 
+    /// Leading columns of an observation row that the normaliser whitens: all of them, except
+    /// for the VLA, whose word ids and pixels go to its encoder raw.
+    pub fn normalized_dim(&self) -> usize {
+        self.policy
+            .encoder()
+            .map_or(self.obs_dim(), |e| e.config().proprio_dim)
+    }
+
+    /// Raw observation rows → the network's input rows (normalised as [`Self::normalized_dim`]
+    /// says).
+    pub fn input_rows(&self, raw_obs: &[f32]) -> NetResult<Vec<f32>> {
+        let Some(norm) = &self.obs_norm else {
+            return Ok(raw_obs.to_vec());
+        };
+        let (dim, lead) = (self.obs_dim(), self.normalized_dim());
+        if lead == dim {
+            return norm.normalize(raw_obs);
+        }
+        if raw_obs.len() % dim != 0 {
+            return Err(NetError::RaggedRows {
+                len: raw_obs.len(),
+                width: dim,
+            });
+        }
+        let leading: Vec<f32> = raw_obs
+            .chunks_exact(dim)
+            .flat_map(|row| row[..lead].iter().copied())
+            .collect();
+        let whitened = norm.normalize(&leading)?;
+        let mut out = raw_obs.to_vec();
+        for (row, w) in out.chunks_exact_mut(dim).zip(whitened.chunks_exact(lead)) {
+            row[..lead].copy_from_slice(w);
+        }
+        Ok(out)
+    }
+
+    /// Folds raw observation rows into the normaliser's statistics (no-op without one).
+    pub fn update_obs_norm(&mut self, raw_obs: &[f32]) -> NetResult<()> {
+        let (dim, lead) = (self.obs_dim(), self.normalized_dim());
+        let Some(norm) = &mut self.obs_norm else {
+            return Ok(());
+        };
+        if lead == dim {
+            return norm.update(raw_obs);
+        }
+        if raw_obs.len() % dim != 0 {
+            return Err(NetError::RaggedRows {
+                len: raw_obs.len(),
+                width: dim,
+            });
+        }
+        let leading: Vec<f32> = raw_obs
+            .chunks_exact(dim)
+            .flat_map(|row| row[..lead].iter().copied())
+            .collect();
+        norm.update(&leading)
+    }
+
     /// Raw observation rows → the network input tensor [B, obs_dim].
     pub fn input_tensor(&self, raw_obs: &[f32]) -> NetResult<Tensor> {
-        match &self.obs_norm {
-            Some(norm) => norm.normalize_tensor(raw_obs),
-            None => rows_tensor(raw_obs, self.obs_dim()),
+        rows_tensor(&self.input_rows(raw_obs)?, self.obs_dim())
+    }
+
+    /// V(s) outputs for network input rows (the critic's own leading columns).
+    pub fn value_outputs(&self, input: &Tensor) -> NetResult<Tensor> {
+        let lead = self.normalized_dim();
+        if lead == self.obs_dim() {
+            self.value.forward(input)
+        } else {
+            self.value.forward(&input.narrow(1, 0, lead)?)
         }
     }
 
@@ -129,7 +203,7 @@ impl ActorCritic {
         Ok(ActOutput {
             actions: actions.flatten_all()?.to_vec1()?,
             log_probs: log_probs.to_vec1()?,
-            values: self.denormalize_values(&self.value.forward(&obs)?.to_vec1()?),
+            values: self.denormalize_values(&self.value_outputs(&obs)?.to_vec1()?),
         })
     }
 
@@ -145,8 +219,7 @@ impl ActorCritic {
     /// V(s) on the returns' scale for raw observations (e.g. to bootstrap a truncated episode).
     pub fn values(&self, raw_obs: &[f32]) -> NetResult<Vec<f32>> {
         let outputs = self
-            .value
-            .forward(&self.input_tensor(raw_obs)?)?
+            .value_outputs(&self.input_tensor(raw_obs)?)?
             .to_vec1()?;
         Ok(self.denormalize_values(&outputs))
     }

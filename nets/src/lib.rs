@@ -13,6 +13,7 @@ mod mlp;
 mod normalizer;
 mod policy;
 mod rng;
+pub mod vla;
 
 pub use activation::Activation;
 pub use actor_critic::{ActOutput, ActorCritic, ActorCriticConfig};
@@ -22,3 +23,4 @@ pub use mlp::{rows_tensor, Linear, Mlp, MlpConfig};
 pub use normalizer::RunningMeanStd;
 pub use policy::{Discriminator, GaussianPolicy, GaussianPolicyConfig, LogStd, ValueNet};
 pub use rng::SplitMix64;
+pub use vla::{VlaEncoder, VlaEncoderConfig};

@@ -3,7 +3,7 @@
 use candle_core::{DType, Device, Tensor, Var, D};
 use serde::{Deserialize, Serialize};
 
-use crate::{Mlp, MlpConfig, NetResult, SplitMix64};
+use crate::{Mlp, MlpConfig, NetError, NetResult, SplitMix64, VlaEncoder, VlaEncoderConfig};
 
 /// How the policy's log standard deviation is handled.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -22,6 +22,9 @@ pub struct GaussianPolicyConfig {
     pub log_std: LogStd,
     /// Scale of the output layer's initial weights, so initial means are near zero.
     pub output_init_scale: f64,
+    /// The VLA student: an image, instruction and proprioception encoder in front of the MLP
+    /// (observation rows in its layout); absent for state-based policies.
+    pub vla: Option<VlaEncoderConfig>,
 }
 
 impl Default for GaussianPolicyConfig {
@@ -30,6 +33,7 @@ impl Default for GaussianPolicyConfig {
             mlp: MlpConfig::default(),
             log_std: LogStd::Fixed(-2.9),
             output_init_scale: 0.01,
+            vla: None,
         }
     }
 }
@@ -42,6 +46,7 @@ enum LogStdParam {
 
 #[derive(Debug, Clone)]
 pub struct GaussianPolicy {
+    encoder: Option<VlaEncoder>,
     mean: Mlp,
     log_std: LogStdParam,
 }
@@ -56,8 +61,20 @@ impl GaussianPolicy {
         rng: &mut SplitMix64,
         dtype: DType,
     ) -> NetResult<Self> {
+        let encoder = match &config.vla {
+            Some(vla) => {
+                if vla.obs_dim() != obs_dim {
+                    return Err(NetError::Config(format!(
+                        "the VLA encoder reads rows of {} values, the observations have {obs_dim}",
+                        vla.obs_dim()
+                    )));
+                }
+                Some(VlaEncoder::new(vla, rng, dtype)?)
+            }
+            None => None,
+        };
         let mean = Mlp::new(
-            obs_dim,
+            encoder.as_ref().map_or(obs_dim, VlaEncoder::feature_dim),
             act_dim,
             &config.mlp,
             config.output_init_scale,
@@ -69,11 +86,22 @@ impl GaussianPolicy {
             LogStd::Fixed(v) => LogStdParam::Fixed(init(v)?),
             LogStd::Learned(v) => LogStdParam::Learned(Var::from_tensor(&init(v)?)?),
         };
-        Ok(Self { mean, log_std })
+        Ok(Self {
+            encoder,
+            mean,
+            log_std,
+        })
     }
 
     pub fn obs_dim(&self) -> usize {
-        self.mean.in_dim()
+        self.encoder
+            .as_ref()
+            .map_or(self.mean.in_dim(), VlaEncoder::obs_dim)
+    }
+
+    /// The VLA encoder, if this is the VLA student.
+    pub fn encoder(&self) -> Option<&VlaEncoder> {
+        self.encoder.as_ref()
     }
 
     pub fn act_dim(&self) -> usize {
@@ -86,7 +114,10 @@ impl GaussianPolicy {
 
     /// Action means, [B, A]: the deterministic action.
     pub fn mean(&self, obs: &Tensor) -> NetResult<Tensor> {
-        self.mean.forward(obs)
+        match &self.encoder {
+            Some(encoder) => self.mean.forward(&encoder.forward(obs)?),
+            None => self.mean.forward(obs),
+        }
     }
 
     /// Log standard deviation, [A].
@@ -129,9 +160,13 @@ impl GaussianPolicy {
         Ok((actions, log_probs))
     }
 
-    /// Trainable parameters named `{prefix}.mean.layers.{i}.*` and `{prefix}.log_std`.
+    /// Trainable parameters named `{prefix}.mean.layers.{i}.*`, `{prefix}.log_std` and (the VLA)
+    /// `{prefix}.encoder.*`.
     pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
         let mut vars = self.mean.named_vars(&format!("{prefix}.mean"));
+        if let Some(encoder) = &self.encoder {
+            vars.extend(encoder.named_vars(&format!("{prefix}.encoder")));
+        }
         if let LogStdParam::Learned(v) = &self.log_std {
             vars.push((format!("{prefix}.log_std"), v.clone()));
         }
@@ -222,6 +257,7 @@ mod tests {
             mlp: MlpConfig::with_hidden(&[8]),
             log_std: LogStd::Learned(-0.5),
             output_init_scale: 0.01,
+            vla: None,
         };
         let policy = GaussianPolicy::new(3, 2, &cfg, &mut rng, DType::F64).unwrap();
         let obs = Tensor::new(&[[0.1f64, -0.2, 0.3]], &Device::Cpu).unwrap();

@@ -12,6 +12,7 @@ pub mod obs;
 pub mod render;
 pub mod room;
 pub mod task;
+pub mod vla;
 pub mod world;
 
 pub use character::Character;

@@ -137,11 +137,15 @@ pub fn render(world: &World, camera: &Camera, third_person: bool) -> Image {
                     let point = camera.eye + dir * hit.time_of_impact;
                     let base = match parent {
                         Some(p) if character.contains(&p) => CHARACTER,
-                        Some(p)
-                            if world.room.objects.contains(&p) || world.room.props.contains(&p) =>
-                        {
-                            OBJECT
-                        }
+                        Some(p) if world.room.objects.contains(&p) => world
+                            .room
+                            .objects
+                            .iter()
+                            .position(|o| *o == p)
+                            .and_then(|i| world.room.object_colours.get(i))
+                            .copied()
+                            .unwrap_or(OBJECT),
+                        Some(p) if world.room.props.contains(&p) => OBJECT,
                         Some(p) if world.room.obstacles.contains(&p) => OBSTACLE,
                         Some(p) if Some(p) == walls => WALL,
                         _ => {

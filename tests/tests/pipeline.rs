@@ -119,7 +119,13 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
         t1_rows,
         "t1 was not trained again"
     );
-    for (stage, budget) in [("t1", 4), ("t1-rr", 6), ("t2", 3), ("student", 6)] {
+    for (stage, budget) in [
+        ("t1", 4),
+        ("t1-rr", 6),
+        ("t2", 3),
+        ("student", 6),
+        ("vla", 3),
+    ] {
         assert_eq!(iteration(&root, stage), budget, "{stage}\n{log}");
         assert!(
             root.join(stage).join("policy.json").is_file(),
@@ -145,6 +151,20 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
     assert!(
         student.contains("t1-rr/policy") && student.contains("t2/policy"),
         "the student's labellers are t1-rr and t2: {student}"
+    );
+    // The VLA is distilled from the student, which labels every cycle; its dataset holds VLA
+    // rows (proprioception, 16 word ids, a 16 x 16 image), not the state.
+    let vla = config_of("vla");
+    assert!(vla.contains("role = \"vla\""), "{vla}");
+    assert_eq!(vla.matches("student/policy").count(), 2, "{vla}");
+    let vla_index: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(root.join("vla/dagger/index.json")).expect("VLA dataset index"),
+    )
+    .expect("json");
+    assert_eq!(
+        vla_index.get("obs_dim").and_then(|v| v.as_u64()),
+        Some(226 + 16 + 3 * 16 * 16),
+        "{vla_index}"
     );
     // The student learned from the dagger-server's labels, across the kill: the aggregated
     // dataset grew every round (rounds made before the kill kept), most rounds' regression
@@ -228,7 +248,13 @@ fn a_pipeline_killed_in_a_stage_finishes_when_run_again_without_redoing_finished
 
     // The pipeline ends with every evaluation in one table per split.
     let summary = std::fs::read_to_string(root.join("eval/summary.md")).unwrap_or_default();
-    for row in ["| t1-first-pair |", "| teachers |", "| student |"] {
+    for row in [
+        "| t1-first-pair |",
+        "| teachers |",
+        "| student |",
+        "| vla |",
+        "| vla-no-language |",
+    ] {
         assert_eq!(summary.matches(row).count(), 2, "{row}: {summary}");
     }
     // A fourth run has nothing left to do.

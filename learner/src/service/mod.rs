@@ -166,7 +166,7 @@ impl TrainConfig {
     pub fn role(&self) -> Result<Role, ServiceError> {
         keys::parse_role(&self.role).ok_or_else(|| {
             ServiceError::Config(format!(
-                "role {:?} is not one of teacher1, teacher2, student",
+                "role {:?} is not one of teacher1, teacher2, student, vla",
                 self.role
             ))
         })
@@ -180,7 +180,13 @@ impl TrainConfig {
     pub fn run_spec(&self) -> RunSpec {
         let model = CharacterModel::amp_humanoid();
         RunSpec {
-            obs_dim: TaskEnv::obs_dim(&model, &self.env),
+            // The VLA reads its own rows (image, instruction, proprioception).
+            obs_dim: self
+                .network
+                .policy
+                .vla
+                .as_ref()
+                .map_or(TaskEnv::obs_dim(&model, &self.env), |v| v.obs_dim()),
             act_dim: model.dofs.len(),
             amp_dim: if self.amp_enabled {
                 TaskEnv::amp_dim(&model, &self.env)
@@ -220,7 +226,17 @@ impl TrainConfig {
                 )));
             }
         }
-        if self.role == "student" {
+        if self.role == "vla" {
+            let vla = self.network.policy.vla.as_ref().ok_or_else(|| {
+                ServiceError::Config(
+                    "a vla run needs the VLA encoder: [network.policy.vla] (the stage preset \
+                     sets it)"
+                        .into(),
+                )
+            })?;
+            vla.check().map_err(ServiceError::Config)?;
+        }
+        if self.role == "student" || self.role == "vla" {
             if self.amp_enabled {
                 return Err(ServiceError::Config(
                     "a student run learns by regression onto its teachers' actions: set \
@@ -394,6 +410,31 @@ struct Book {
 }
 
 impl Book {
+    /// Takes one liveliness change of the run's processes; whether a process joined.
+    fn liveliness(&mut self, run_id: &str, sample: &zenoh::sample::Sample) -> bool {
+        let key = sample.key_expr().as_str();
+        let Some(process) = keys::process_of_status_key(run_id, key) else {
+            return false;
+        };
+        if process == "learner" {
+            return false;
+        }
+        match sample.kind() {
+            SampleKind::Put => {
+                if self.alive.insert(process.to_owned()) {
+                    tracing::info!("{process} joined ({} alive)", self.alive.len());
+                }
+                true
+            }
+            SampleKind::Delete => {
+                if self.alive.remove(process) {
+                    tracing::info!("{process} left ({} alive)", self.alive.len());
+                }
+                false
+            }
+        }
+    }
+
     fn actors_alive(&self) -> Vec<String> {
         self.alive.intersection(&self.seen).cloned().collect()
     }
@@ -507,13 +548,18 @@ fn init_actor_critic(learner: &mut Learner, path: &Path) -> Result<(), ServiceEr
 fn load_teachers(config: &TrainConfig, role: Role) -> Result<Vec<(Role, Learner)>, ServiceError> {
     let needed: &[(Role, &Option<PathBuf>, &str)] = match role {
         Role::Teacher2 => &[(Role::Teacher1, &config.teacher1, "teacher1")],
-        Role::Student => &[
+        // The VLA's labeller is the unified student, serving every cycle: it stands on both
+        // teachers' keys (`Stage::Vla` sets both to it).
+        Role::Student | Role::Vla => &[
             (Role::Teacher1, &config.teacher1, "teacher1"),
             (Role::Teacher2, &config.teacher2, "teacher2"),
         ],
         _ => &[],
     };
     let spec = config.run_spec();
+    // Teachers (and the VLA's labeller) read the state observation, whatever this run's policy
+    // reads.
+    let state_obs_dim = TaskEnv::obs_dim(&CharacterModel::amp_humanoid(), &config.env);
     let mut teachers = Vec::new();
     for (teacher, path, field) in needed {
         let Some(path) = path else {
@@ -527,11 +573,11 @@ fn load_teachers(config: &TrainConfig, role: Role) -> Result<Vec<(Role, Learner)
         let stem = lhm_nets::checkpoint::stem_of(path);
         let t = Learner::load(&stem, None)?;
         let (obs, act) = (t.actor_critic.obs_dim(), t.actor_critic.act_dim());
-        if (obs, act) != (spec.obs_dim, spec.act_dim) {
+        if (obs, act) != (state_obs_dim, spec.act_dim) {
             return Err(ServiceError::Config(format!(
-                "{}: {field} takes {obs} observations and gives {act} actions; this run has {} and {}",
+                "{}: {field} takes {obs} observations and gives {act} actions; this run's \
+                 environment has {state_obs_dim} and {}",
                 stem.display(),
-                spec.obs_dim,
                 spec.act_dim
             )));
         }
@@ -564,6 +610,7 @@ fn serve_teacher(
 ) -> Result<ServedTeacher, ServiceError> {
     // The teacher's own network settings (its sizes or noise may differ from this run's).
     let teacher_spec = RunSpec {
+        obs_dim: teacher.actor_critic.obs_dim(),
         actor_critic: teacher.actor_critic.config.clone(),
         ..spec.clone()
     };
@@ -699,6 +746,39 @@ pub struct Hooks<'a> {
     pub on_listening: Option<Box<dyn FnMut() + 'a>>,
 }
 
+/// Prepares the run directory (refusing one of another role, writing `config.toml`) and the
+/// learner: resumed from its checkpoint if it has one (with the iteration it resumes from), else
+/// fresh or started from `init_from`.
+fn open_learner(
+    config: &TrainConfig,
+    run_dir: &Path,
+) -> Result<(Learner, Option<u64>), ServiceError> {
+    std::fs::create_dir_all(run_dir).map_err(|source| ServiceError::Io {
+        path: run_dir.to_owned(),
+        source,
+    })?;
+    refuse_another_role(config, run_dir)?;
+    config.write_run_config(run_dir)?;
+    let stem = checkpoint_stem(run_dir);
+    let learner_config = config.learner_config();
+    if stem.with_extension("json").is_file() {
+        let l = Learner::load(&stem, Some(&learner_config))?;
+        tracing::info!(
+            "resuming {} from iteration {}",
+            stem.display(),
+            l.counters.iteration
+        );
+        let it = l.counters.iteration;
+        Ok((l, Some(it)))
+    } else {
+        let mut fresh = Learner::new(learner_config)?;
+        if let Some(path) = &config.init_from {
+            init_actor_critic(&mut fresh, path)?;
+        }
+        Ok((fresh, None))
+    }
+}
+
 /// Runs the learner until `max_iterations` or a stop request; returns the final status.
 pub fn run_learner(
     config: &TrainConfig,
@@ -718,32 +798,10 @@ pub fn run_learner(
         ));
     }
     let run_dir = config.run_dir();
-    std::fs::create_dir_all(&run_dir).map_err(|source| ServiceError::Io {
-        path: run_dir.clone(),
-        source,
-    })?;
-    refuse_another_role(config, &run_dir)?;
-    config.write_run_config(&run_dir)?;
     let stem = checkpoint_stem(&run_dir);
-    let learner_config = config.learner_config();
-    let (mut learner, resumed) = if stem.with_extension("json").is_file() {
-        let l = Learner::load(&stem, Some(&learner_config))?;
-        tracing::info!(
-            "resuming {} from iteration {}",
-            stem.display(),
-            l.counters.iteration
-        );
-        let it = l.counters.iteration;
-        (l, Some(it))
-    } else {
-        let mut fresh = Learner::new(learner_config)?;
-        if let Some(path) = &config.init_from {
-            init_actor_critic(&mut fresh, path)?;
-        }
-        (fresh, None)
-    };
+    let (mut learner, resumed) = open_learner(config, &run_dir)?;
     let mut optimiser = match role {
-        Role::Student => Optimiser::dagger(&config.dagger, &learner, &run_dir)?,
+        Role::Student | Role::Vla => Optimiser::dagger(&config.dagger, &learner, &run_dir)?,
         _ => Optimiser::PpoAmp { demo },
     };
     let mut spec = config.run_spec();
@@ -847,28 +905,9 @@ pub fn run_learner(
             break;
         }
         while let Ok(Some(sample)) = alive_sub.try_recv() {
-            let key = sample.key_expr().as_str().to_owned();
-            let Some(process) = keys::process_of_status_key(&config.run_id, &key) else {
-                continue;
-            };
-            if process == "learner" {
-                continue;
-            }
-            match sample.kind() {
-                SampleKind::Put => {
-                    if book.alive.insert(process.to_owned()) {
-                        tracing::info!("{process} joined ({} alive)", book.alive.len());
-                    }
-                    // A (re)joining actor may have missed the last broadcast (e.g. it outlived a
-                    // learner restart and holds a newer version than the checkpoint): send again.
-                    republish = true;
-                }
-                SampleKind::Delete => {
-                    if book.alive.remove(process) {
-                        tracing::info!("{process} left ({} alive)", book.alive.len());
-                    }
-                }
-            }
+            // A (re)joining process may have missed the last broadcast (e.g. it outlived a
+            // learner restart and holds a newer version than the checkpoint): send again.
+            republish |= book.liveliness(&config.run_id, &sample);
         }
         if republish && last_republish.elapsed() >= Duration::from_millis(500) {
             let bytes = latest.lock().map(|b| b.clone()).unwrap_or_default();
@@ -971,70 +1010,13 @@ pub fn run_learner(
             reach_rate: s.reach_rate(),
         };
         if let Some(csv) = metrics_csv.as_mut() {
-            let terms: Vec<(String, f64)> = s
-                .reward_terms
-                .iter()
-                .map(|(k, v)| (format!("reward_{k}"), *v))
-                .collect();
-            let mut row = vec![
-                ("iteration", it as f64),
-                ("samples", learner.counters.samples as f64),
-                ("wall_s", run_started.elapsed().as_secs_f64()),
-                ("samples_per_s", report.samples_per_s),
-                ("update_s", update_s),
-                ("episodes", s.episodes as f64),
-                ("mean_return", s.mean_return),
-                ("mean_episode_length", s.mean_length),
-                ("success_rate", s.success_rate),
-                ("fall_fraction", report.fall_fraction),
-                ("task_start_fall_fraction", s.task_start_fall_fraction()),
-                ("reach_rate", report.reach_rate),
-                ("disc_accuracy", report.disc_accuracy.unwrap_or(f64::NAN)),
-                ("style_reward", s.mean_style_reward),
-                ("task_reward", s.mean_task_reward),
-            ];
-            row.extend(update.metrics.iter().map(|m| (m.column, m.value)));
-            row.extend([
-                ("stale_chunks", book.counters.stale as f64),
-                ("accepted_chunks", book.counters.accepted as f64),
-            ]);
-            row.extend(terms.iter().map(|(k, v)| (k.as_str(), *v)));
-            if let Err(e) = csv.append(&row) {
+            let wall_s = run_started.elapsed().as_secs_f64();
+            if let Err(e) = append_metrics_row(csv, &report, &update, &book.counters, wall_s) {
                 tracing::warn!("writing {}: {e}; metrics.csv stops", csv.path().display());
                 metrics_csv = None;
             }
         }
-        let mut m = Metrics {
-            run_id: config.run_id.clone(),
-            process: "learner".into(),
-            unix_time_ms: lhm_cluster::clock::unix_ms(),
-            iteration: it,
-            ..Metrics::versioned()
-        };
-        let v = &mut m.values;
-        v.insert("samples_per_s".into(), report.samples_per_s);
-        v.insert("update_s".into(), update_s);
-        v.insert("episodes".into(), s.episodes as f64);
-        v.insert("mean_return".into(), s.mean_return);
-        v.insert("success_rate".into(), s.success_rate);
-        v.insert("falls".into(), s.falls as f64);
-        v.insert("fall_fraction".into(), report.fall_fraction);
-        for (name, mean) in &s.reward_terms {
-            v.insert(format!("reward/{name}"), *mean);
-        }
-        v.insert("reach_rate".into(), report.reach_rate);
-        v.insert("mean_task_reward".into(), s.mean_task_reward);
-        v.insert("mean_style_reward".into(), s.mean_style_reward);
-        for m in &update.metrics {
-            v.insert(m.key.into(), m.value);
-        }
-        if let Some(a) = update.disc_accuracy {
-            v.insert("amp/accuracy".into(), a);
-        }
-        v.insert("intake/accepted".into(), book.counters.accepted as f64);
-        v.insert("intake/stale".into(), book.counters.stale as f64);
-        v.insert("intake/rejected".into(), book.counters.rejected() as f64);
-        v.insert("actors_alive".into(), book.actors_alive().len() as f64);
+        let m = metrics_message(&config.run_id, &report, &update, &book);
         recording.with("metrics", |r| r.write_metrics(&m));
         if let Ok(bytes) = m.encode_checked() {
             let _ = session
@@ -1063,6 +1045,88 @@ pub fn run_learner(
     recording.finish();
     let _ = session.close().wait();
     Ok(final_status)
+}
+
+/// One row of `metrics.csv` for an iteration.
+fn append_metrics_row(
+    csv: &mut metrics_csv::MetricsCsv,
+    report: &IterationReport,
+    update: &optimise::Update,
+    counters: &IntakeCounters,
+    wall_s: f64,
+) -> std::io::Result<()> {
+    let s = &update.summary;
+    let terms: Vec<(String, f64)> = s
+        .reward_terms
+        .iter()
+        .map(|(k, v)| (format!("reward_{k}"), *v))
+        .collect();
+    let mut row = vec![
+        ("iteration", report.iteration as f64),
+        ("samples", report.samples as f64),
+        ("wall_s", wall_s),
+        ("samples_per_s", report.samples_per_s),
+        ("update_s", report.update_s),
+        ("episodes", s.episodes as f64),
+        ("mean_return", s.mean_return),
+        ("mean_episode_length", s.mean_length),
+        ("success_rate", s.success_rate),
+        ("fall_fraction", report.fall_fraction),
+        ("task_start_fall_fraction", s.task_start_fall_fraction()),
+        ("reach_rate", report.reach_rate),
+        ("disc_accuracy", report.disc_accuracy.unwrap_or(f64::NAN)),
+        ("style_reward", s.mean_style_reward),
+        ("task_reward", s.mean_task_reward),
+    ];
+    row.extend(update.metrics.iter().map(|m| (m.column, m.value)));
+    row.extend([
+        ("stale_chunks", counters.stale as f64),
+        ("accepted_chunks", counters.accepted as f64),
+    ]);
+    row.extend(terms.iter().map(|(k, v)| (k.as_str(), *v)));
+    csv.append(&row)
+}
+
+/// The iteration's metrics as recorded in `run.mcap` and put on the run's metrics key.
+fn metrics_message(
+    run_id: &str,
+    report: &IterationReport,
+    update: &optimise::Update,
+    book: &Book,
+) -> Metrics {
+    let s = &update.summary;
+    let mut m = Metrics {
+        run_id: run_id.to_owned(),
+        process: "learner".into(),
+        unix_time_ms: lhm_cluster::clock::unix_ms(),
+        iteration: report.iteration,
+        ..Metrics::versioned()
+    };
+    let v = &mut m.values;
+    v.insert("samples_per_s".into(), report.samples_per_s);
+    v.insert("update_s".into(), report.update_s);
+    v.insert("episodes".into(), s.episodes as f64);
+    v.insert("mean_return".into(), s.mean_return);
+    v.insert("success_rate".into(), s.success_rate);
+    v.insert("falls".into(), s.falls as f64);
+    v.insert("fall_fraction".into(), report.fall_fraction);
+    for (name, mean) in &s.reward_terms {
+        v.insert(format!("reward/{name}"), *mean);
+    }
+    v.insert("reach_rate".into(), report.reach_rate);
+    v.insert("mean_task_reward".into(), s.mean_task_reward);
+    v.insert("mean_style_reward".into(), s.mean_style_reward);
+    for m in &update.metrics {
+        v.insert(m.key.into(), m.value);
+    }
+    if let Some(a) = update.disc_accuracy {
+        v.insert("amp/accuracy".into(), a);
+    }
+    v.insert("intake/accepted".into(), book.counters.accepted as f64);
+    v.insert("intake/stale".into(), book.counters.stale as f64);
+    v.insert("intake/rejected".into(), book.counters.rejected() as f64);
+    v.insert("actors_alive".into(), book.actors_alive().len() as f64);
+    m
 }
 
 #[cfg(test)]

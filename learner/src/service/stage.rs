@@ -1,7 +1,7 @@
 //! The paper's training stages as presets of one [`TrainConfig`]: the same actor–learner run,
 //! differing only in what the actors roll out (role, tasks, the frozen teachers) and what the
 //! learner optimises (the reward weights and where the weights start for PPO + AMP; regression
-//! onto the teachers' labels for the student, `super::optimise`).
+//! onto the teachers' labels for the student and the VLA, `super::optimise`).
 
 use super::{ServiceError, TrainConfig};
 use std::path::{Path, PathBuf};
@@ -26,6 +26,10 @@ pub enum Stage {
     /// The unified student, distilled from both teachers by DAgger on two-object tasks.
     #[serde(rename = "student")]
     Student,
+    /// The VLA extension (paper Sec. 3.4): the unified student distilled again by DAgger into a
+    /// policy that sees only egocentric RGB, proprioception and each cycle's instruction.
+    #[serde(rename = "vla")]
+    Vla,
     /// Baseline "End-to-End RL": one policy trained from scratch by PPO (+AMP) on whole
     /// two-object tasks, every cycle in one reset-free episode.
     #[serde(rename = "e2e")]
@@ -36,12 +40,33 @@ pub enum Stage {
     Curriculum,
 }
 
+/// DAgger rows a `vla` stage keeps unless its configuration sets `dagger.capacity`.
+pub const VLA_DAGGER_CAPACITY: usize = 20_000;
+
+/// The words of every training instruction (the VLA's vocabulary): the unseen split's new
+/// sentence frames are left for the encoder to meet as unknown words.
+pub fn training_vocabulary(scenes: Option<&Path>) -> Result<Vec<String>, ServiceError> {
+    let bench = match scenes {
+        Some(dir) => lhm_scenes::Benchmark::load_dir(dir),
+        None => lhm_scenes::Benchmark::embedded(),
+    }
+    .map_err(|e| ServiceError::Config(format!("the VLA's vocabulary needs the scenes: {e}")))?;
+    let tasks = bench.tasks(lhm_scenes::Split::Train);
+    let vocabulary = lhm_sim::vla::Vocabulary::from_instructions(
+        tasks
+            .iter()
+            .flat_map(|t| t.sequence.iter().map(|s| s.instruction.as_str())),
+    );
+    Ok(vocabulary.words)
+}
+
 impl Stage {
-    pub const ALL: [Stage; 6] = [
+    pub const ALL: [Stage; 7] = [
         Stage::T1,
         Stage::T1Rr,
         Stage::T2,
         Stage::Student,
+        Stage::Vla,
         Stage::E2e,
         Stage::Curriculum,
     ];
@@ -52,19 +77,20 @@ impl Stage {
             Stage::T1Rr => "t1-rr",
             Stage::T2 => "t2",
             Stage::Student => "student",
+            Stage::Vla => "vla",
             Stage::E2e => "e2e",
             Stage::Curriculum => "curriculum",
         }
     }
 
-    /// `t1`, `t1-rr`, `t2`, `student`, or the baselines' `e2e` and `curriculum`.
+    /// `t1`, `t1-rr`, `t2`, `student`, `vla`, or the baselines' `e2e` and `curriculum`.
     pub fn parse(text: &str) -> Result<Self, ServiceError> {
         Self::ALL
             .into_iter()
             .find(|s| s.name() == text)
             .ok_or_else(|| {
                 ServiceError::Config(format!(
-                    "stage {text:?} is not one of t1, t1-rr, t2, student, e2e, curriculum"
+                    "stage {text:?} is not one of t1, t1-rr, t2, student, vla, e2e, curriculum"
                 ))
             })
     }
@@ -84,6 +110,12 @@ impl Stage {
     /// - `student`: role student, both teachers frozen as labellers (the given ones win over the
     ///   configuration's), no AMP (it learns by regression), on the two-object training tasks
     ///   unless the configuration lists others; its weights start fresh.
+    /// - `vla`: role vla, the unified student (`teacher1` here) frozen as the labeller of every
+    ///   cycle (the configuration's `teacher1` if none is given), no AMP, on the two-object
+    ///   training tasks unless the configuration lists others; the policy gets the VLA encoder
+    ///   (the configuration's `[network.policy.vla]` sizes, or the defaults) with the character's
+    ///   proprioception width and, unless the configuration lists one, the vocabulary of the
+    ///   training instructions.
     /// - `e2e`: role teacher1 from scratch (a `teacher1` is refused) on the two-object training
     ///   tasks, whole episodes, unless the configuration lists other tasks.
     /// - `curriculum`: role teacher1 initialised like `t1-rr` (the configuration's `init_from`,
@@ -168,6 +200,36 @@ impl Stage {
                     config.init_from = Some(t1.clone());
                 }
                 config.teacher1 = Some(t1);
+                whole_tasks(config);
+            }
+            Stage::Vla => {
+                let labeller = teacher1
+                    .map(Path::to_path_buf)
+                    .or_else(|| config.teacher1.clone())
+                    .ok_or_else(|| {
+                        ServiceError::Config(
+                            "stage vla needs the unified student to label with: --teacher1 \
+                             runs/p/student/policy"
+                                .into(),
+                        )
+                    })?;
+                let mut vla = config.network.policy.vla.clone().unwrap_or_default();
+                vla.proprio_dim =
+                    lhm_sim::obs::proprioception_dim(&lhm_sim::CharacterModel::amp_humanoid());
+                if vla.vocabulary.is_empty() {
+                    vla.vocabulary = training_vocabulary(config.scenes.as_deref())?;
+                }
+                // Its labeller stands on both teachers' keys: one policy for every cycle.
+                config.teacher1 = Some(labeller.clone());
+                config.teacher2 = Some(labeller);
+                config.network.policy.vla = Some(vla);
+                // A VLA row carries an image (~50 KB at 64 × 64): the student's default of 100k
+                // rows would be 5 GB; a configured capacity is kept.
+                if config.dagger.capacity == crate::dagger::DaggerConfig::default().capacity {
+                    config.dagger.capacity = VLA_DAGGER_CAPACITY;
+                }
+                config.role = "vla".into();
+                config.amp_enabled = false;
                 whole_tasks(config);
             }
             Stage::Student => {
