@@ -188,8 +188,13 @@ impl PipelineConfig {
                     .then_some("a Teacher 1 stage (t1 or t1-rr) before it"),
                 Stage::Student => (!seen.contains(&Stage::T2))
                     .then_some("a t2 stage (and a Teacher 1 stage) before it"),
-                Stage::Vla => (!seen.contains(&Stage::Student))
-                    .then_some("a student stage before it (the VLA is distilled from it)"),
+                // Distilled from the deployable policy: the student, or a baseline's one policy.
+                Stage::Vla => (!seen
+                    .iter()
+                    .any(|s| matches!(s, Stage::Student | Stage::E2e | Stage::Curriculum)))
+                .then_some(
+                    "a student (or e2e, curriculum) stage before it: the VLA is distilled from it",
+                ),
                 Stage::E2e => (!seen.is_empty())
                     .then_some("to be the only stage (it trains one policy from scratch)"),
                 Stage::Curriculum => (!seen.iter().any(|s| matches!(s, Stage::T1 | Stage::T1Rr)))
@@ -315,9 +320,9 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
         } else {
             None
         };
-        // The VLA's labeller is the unified student.
+        // The VLA's labeller is the unified student (a baseline's: its one policy).
         let labeller1 = if *stage == Stage::Vla {
-            student.as_deref()
+            student.as_deref().or(single.as_deref())
         } else {
             teacher1.as_deref()
         };

@@ -1,5 +1,6 @@
-//! `lhm tables`: the paper's Tables 1 (350 training tasks), 2 (66 unseen tasks) and 4 (five-object
-//! sequences) from the method pipelines in one runs directory (`lhm pipeline --config
+//! `lhm tables`: the paper's Tables 1 (350 training tasks), 2 (66 unseen tasks), 3 (each method's
+//! VLA, distilled from its deployable policy, on the unseen tasks; with its language ablation) and
+//! 4 (five-object sequences) from the method pipelines in one runs directory (`lhm pipeline --config
 //! configs/methods/<method>.toml --runs-dir DIR`), each policy run by `lhm eval` on every task
 //! and seed (or reused from an earlier identical evaluation), mean ± std over seeds, in Markdown
 //! and CSV, with the paper's own figures beside ours.
@@ -22,7 +23,8 @@ pub struct TablesArgs {
     /// Only the first N tasks of each split (a quick look; the tables say so).
     #[arg(long)]
     limit: Option<usize>,
-    /// Where the tables go (`table1-train.md`, `.csv`, and the same for table2-unseen, table4-ext5).
+    /// Where the tables go (`table1-train.md`, `.csv`, and the same for table2-unseen, table3-vla,
+    /// table4-ext5).
     #[arg(short, long)]
     output: PathBuf,
     #[command(flatten)]
@@ -37,10 +39,13 @@ struct TableSpec {
     split: &'static str,
     cycles: usize,
     with_dist: bool,
+    /// The methods' VLA rows (a `vla` stage's policy, with and without language) instead of
+    /// their state-based ones.
+    vla: bool,
     paper: &'static [(&'static str, &'static [f64])],
 }
 
-/// The paper's figures (../shared/paper, Tables 1, 2 and 4), shown beside ours for reference.
+/// The paper's figures (../shared/paper, Tables 1-4), shown beside ours for reference.
 const TABLES: &[TableSpec] = &[
     TableSpec {
         file: "table1-train",
@@ -48,6 +53,7 @@ const TABLES: &[TableSpec] = &[
         split: "train",
         cycles: 2,
         with_dist: true,
+        vla: false,
         paper: &[
             ("End-to-End RL", &[2.3, 0.0, 0.0, 2.05, 1.97]),
             ("Curriculum RL", &[88.3, 48.5, 47.2, 0.26, 1.01]),
@@ -67,6 +73,7 @@ const TABLES: &[TableSpec] = &[
         split: "unseen",
         cycles: 2,
         with_dist: true,
+        vla: false,
         paper: &[
             ("End-to-End RL", &[1.4, 0.0, 0.0, 2.37, 2.28]),
             ("Curriculum RL", &[75.5, 40.4, 39.5, 0.36, 1.11]),
@@ -81,11 +88,33 @@ const TABLES: &[TableSpec] = &[
         ],
     },
     TableSpec {
+        file: "table3-vla",
+        title:
+            "Table 3: each method's VLA (egocentric RGB, proprioception, instruction) on the 66 \
+                unseen tasks",
+        split: "unseen",
+        cycles: 2,
+        with_dist: true,
+        vla: true,
+        paper: &[
+            ("End-to-End RL", &[1.3, 0.0, 0.0, 2.50, 2.49]),
+            ("Curriculum RL", &[71.5, 41.1, 40.7, 0.37, 1.18]),
+            ("Hierarchical RL", &[29.3, 20.7, 16.5, 1.04, 1.45]),
+            ("HumanVLA", &[34.2, 29.8, 23.5, 0.70, 1.26]),
+            ("InterMimic", &[16.3, 8.4, 6.2, 1.64, 2.22]),
+            ("TokenHSI", &[32.0, 27.0, 23.7, 0.72, 1.31]),
+            ("LHM w/o RR", &[66.7, 52.2, 48.7, 0.60, 0.68]),
+            ("LHM w/o AMP", &[25.3, 14.5, 10.6, 1.39, 1.91]),
+            ("LHM-S", &[76.5, 65.4, 63.7, 0.42, 0.56]),
+        ],
+    },
+    TableSpec {
         file: "table4-ext5",
         title: "Table 4: five-object sequences (trained on two objects)",
         split: "ext5",
         cycles: 5,
         with_dist: false,
+        vla: false,
         paper: &[
             ("End-to-End RL", &[2.4, 0.0, 0.0, 0.0, 0.0, 0.0]),
             ("Curriculum RL", &[90.4, 51.8, 34.3, 22.3, 6.7, 1.7]),
@@ -141,19 +170,30 @@ fn methods(runs: &Path) -> Result<Vec<(PathBuf, Manifest)>> {
     Ok(out)
 }
 
-/// Our rows of a method: its teachers ("-T"), its student ("-S"), or a baseline's one policy.
-fn rows_of(dir: &Path, manifest: &Manifest) -> Vec<OurRow> {
+/// Our rows of a method: its teachers ("-T"), its student ("-S"), or a baseline's one policy;
+/// with `vla`, its VLA with and without language instead (Table 3).
+fn rows_of(dir: &Path, manifest: &Manifest, vla: bool) -> Vec<OurRow> {
     let teacher1 = stage_policy(dir, "t1-rr").or_else(|| stage_policy(dir, "t1"));
     let teacher2 = stage_policy(dir, "t2");
     let student = stage_policy(dir, "student");
     let single = stage_policy(dir, "curriculum").or_else(|| stage_policy(dir, "e2e"));
-    let policies = Policies {
-        teacher1: teacher1.as_deref(),
-        teacher2: teacher2.as_deref(),
-        student: student.as_deref(),
-        // The VLA's rows belong to Table 3, not to these.
-        vla: None,
-        single: single.as_deref(),
+    let vla_policy = stage_policy(dir, "vla");
+    let policies = if vla {
+        Policies {
+            teacher1: None,
+            teacher2: None,
+            student: None,
+            vla: vla_policy.as_deref(),
+            single: None,
+        }
+    } else {
+        Policies {
+            teacher1: teacher1.as_deref(),
+            teacher2: teacher2.as_deref(),
+            student: student.as_deref(),
+            vla: None,
+            single: single.as_deref(),
+        }
     };
     let label = &manifest.label;
     let stages: Vec<String> = manifest
@@ -176,7 +216,18 @@ fn rows_of(dir: &Path, manifest: &Manifest) -> Vec<OurRow> {
         .into_iter()
         .filter(|r| !r.first_pair)
         .map(|r: EvalRow<'_>| {
+            // The paper's VLA rows are named by the policy they were distilled from.
+            let vla_name = |suffix: &str| {
+                if label == "LHM" {
+                    (format!("{label}-S (VLA{suffix})"), "LHM-S".to_string())
+                } else {
+                    (format!("{label} (VLA{suffix})"), label.clone())
+                }
+            };
             let (name, paper_name) = match r.name {
+                "vla" => vla_name(""),
+                // The paper gives no figure for the ablation ("near zero").
+                "vla-no-language" => (vla_name(", no language").0, String::new()),
                 "teachers" => (format!("{label}-T"), format!("{label}-T")),
                 // The paper's ablation rows are deployable policies: compared with our student.
                 "student" if label == "LHM" => (format!("{label}-S"), format!("{label}-S")),
@@ -300,7 +351,14 @@ pub fn run(args: TablesArgs) -> Result<()> {
             args.runs.display()
         );
     }
-    let rows: Vec<OurRow> = methods.iter().flat_map(|(d, m)| rows_of(d, m)).collect();
+    let rows: Vec<OurRow> = methods
+        .iter()
+        .flat_map(|(d, m)| rows_of(d, m, false))
+        .collect();
+    let vla_rows: Vec<OurRow> = methods
+        .iter()
+        .flat_map(|(d, m)| rows_of(d, m, true))
+        .collect();
     if rows.is_empty() {
         bail!(
             "{}: the method pipelines have no finished policy yet",
@@ -311,6 +369,7 @@ pub fn run(args: TablesArgs) -> Result<()> {
         .with_context(|| format!("creating {}", args.output.display()))?;
     let bench = args.scenes.load()?;
     for spec in TABLES {
+        let rows = if spec.vla { &vla_rows } else { &rows };
         let mut tasks = crate::eval_cmd::split_tasks(&bench, spec.split)?.len();
         if let Some(n) = args.limit {
             tasks = tasks.min(n);
@@ -358,7 +417,10 @@ pub fn run(args: TablesArgs) -> Result<()> {
         let mut csv = format!("{}\n", csv_head.join(","));
         let mut ours: Vec<&str> = Vec::new();
         let mut made_by = String::new();
-        for row in &rows {
+        if rows.is_empty() {
+            md.push_str("| (no method pipeline has a `vla` stage yet) |\n");
+        }
+        for row in rows {
             made_by.push_str(&format!(
                 "- {}: `{}` (saved at iteration {}){}, {}\n",
                 row.name,

@@ -354,6 +354,46 @@ mod tests {
     }
 
     #[test]
+    fn a_vla_actor_critic_normalises_only_proprioception_and_its_weights_round_trip() {
+        use crate::{ActorCritic, ActorCriticConfig};
+        let c = tiny();
+        let mut config = ActorCriticConfig::with_hidden(&[8]);
+        config.policy.vla = Some(c.clone());
+        let mut ac = ActorCritic::new(c.obs_dim(), 2, &config).unwrap();
+        assert_eq!(ac.normalized_dim(), 3);
+        assert_eq!(ac.obs_norm.as_ref().map(|n| n.dim()), Some(3));
+        let rows = [
+            row(&c, [3.0, 4.0, 2.0, 0.0], 0.5),
+            row(&c, [2.0, 0.0, 0.0, 0.0], 0.9),
+        ]
+        .concat();
+        let mut shifted = rows.clone();
+        shifted[0] += 1.0;
+        ac.update_obs_norm(&shifted).unwrap();
+        let input = ac.input_rows(&rows).unwrap();
+        // Word ids and pixels pass through untouched; the proprioception is whitened.
+        assert_eq!(&input[3..c.obs_dim()], &rows[3..c.obs_dim()]);
+        assert_ne!(input[0], rows[0]);
+        let actions = ac.act_deterministic(&rows).unwrap();
+        assert_eq!(actions.len(), 4);
+        assert_eq!(ac.values(&rows).unwrap().len(), 2);
+        // The encoder's weights travel with the policy's.
+        let names: Vec<String> = ac.named_vars().into_iter().map(|(n, _)| n).collect();
+        assert!(
+            names.iter().any(|n| n == "policy.encoder.words"),
+            "{names:?}"
+        );
+        let bytes = ac.weights_safetensors().unwrap();
+        let mut other = config.clone();
+        other.init_seed = 9;
+        let mut copy = ActorCritic::new(c.obs_dim(), 2, &other).unwrap();
+        copy.obs_norm.clone_from(&ac.obs_norm);
+        assert_ne!(copy.act_deterministic(&rows).unwrap(), actions);
+        copy.load_weights_safetensors(&bytes).unwrap();
+        assert_eq!(copy.act_deterministic(&rows).unwrap(), actions);
+    }
+
+    #[test]
     fn a_bad_layout_is_refused_by_name() {
         let mut c = tiny();
         c.image_size = 6;

@@ -1,7 +1,8 @@
 //! Every method of `configs/methods/` trains through `lhm pipeline` at a tiny budget (each stage
-//! scaled down to an iteration or two, small networks from the smoke overlay), and `lhm tables`
-//! writes the paper's Tables 1, 2 and 4 with a row for each of our methods, every column, and the
-//! paper's figures beside them; a second `lhm tables` reuses every evaluation.
+//! scaled down to an iteration or two, small networks from the smoke VLA overlay), and `lhm tables`
+//! writes the paper's Tables 1-4 (Table 3: each method's VLA, with and without language) with a row
+//! for each of our methods, every column, and the paper's figures beside them; a second
+//! `lhm tables` reuses every evaluation.
 
 use std::path::Path;
 use std::process::Command;
@@ -30,7 +31,9 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let runs = dir.join("runs");
     let runs_arg = runs.display().to_string();
-    let overlay = repo.join("configs/smoke-stage.toml").display().to_string();
+    // The smoke stage's sizes, and a tiny VLA encoder (16 x 16 images) for the vla stages; the
+    // other stages drop the VLA section (Stage::apply).
+    let overlay = repo.join("configs/smoke-vla.toml").display().to_string();
     for method in METHODS {
         let config = repo.join(format!("configs/methods/{method}.toml"));
         let log = run(&[
@@ -71,6 +74,17 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
         "End-to-End RL",
         "Curriculum RL",
     ];
+    // Table 3: every method's VLA, with and without its instructions.
+    let vla_rows: Vec<String> = [
+        "LHM-S",
+        "LHM w/o RR",
+        "LHM w/o AMP",
+        "End-to-End RL",
+        "Curriculum RL",
+    ]
+    .iter()
+    .flat_map(|m| [format!("{m} (VLA)"), format!("{m} (VLA, no language)")])
+    .collect();
     for (file, columns) in [
         (
             "table1-train",
@@ -84,6 +98,16 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
         ),
         (
             "table2-unseen",
+            &[
+                "Success 1 (%)",
+                "Success 2 (%)",
+                "Success All (%)",
+                "Dist 1 (m)",
+                "Dist 2 (m)",
+            ][..],
+        ),
+        (
+            "table3-vla",
             &[
                 "Success 1 (%)",
                 "Success 2 (%)",
@@ -110,7 +134,12 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
         for column in columns {
             assert!(header.contains(column), "{file}: no {column}: {header}");
         }
-        for row in rows {
+        let (expected, ours): (Vec<&str>, usize) = if file == "table3-vla" {
+            (vla_rows.iter().map(String::as_str).collect(), 10)
+        } else {
+            (rows.to_vec(), 8)
+        };
+        for row in expected {
             let line = md
                 .lines()
                 .find(|l| l.starts_with(&format!("| {row} |")))
@@ -130,11 +159,18 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
             );
         }
         let csv = std::fs::read_to_string(tables.join(format!("{file}.csv"))).expect(file);
-        assert_eq!(csv.lines().count(), 1 + 8, "{file}: 8 rows of ours\n{csv}");
+        assert_eq!(
+            csv.lines().count(),
+            1 + ours,
+            "{file}: {ours} rows of ours\n{csv}"
+        );
+        if file == "table3-vla" {
+            assert!(md.contains("76.5 / 65.4 / 63.7 / 0.42 / 0.56"), "{md}");
+        }
     }
     // Every evaluation is reused the second time.
     let again = run(&args);
     assert!(!again.contains("evaluating"), "{again}");
-    assert_eq!(again.matches("reusing").count(), 8 * 3, "{again}");
+    assert_eq!(again.matches("reusing").count(), 8 * 3 + 10, "{again}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -235,6 +235,11 @@ impl TrainConfig {
                 )
             })?;
             vla.check().map_err(ServiceError::Config)?;
+        } else if self.network.policy.vla.is_some() {
+            return Err(ServiceError::Config(format!(
+                "[network.policy.vla] is for role vla (the VLA stage); this run's role is {}",
+                self.role
+            )));
         }
         if self.role == "student" || self.role == "vla" {
             if self.amp_enabled {

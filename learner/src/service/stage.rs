@@ -51,11 +51,29 @@ pub fn training_vocabulary(scenes: Option<&Path>) -> Result<Vec<String>, Service
         None => lhm_scenes::Benchmark::embedded(),
     }
     .map_err(|e| ServiceError::Config(format!("the VLA's vocabulary needs the scenes: {e}")))?;
-    let tasks = bench.tasks(lhm_scenes::Split::Train);
-    let vocabulary = lhm_sim::vla::Vocabulary::from_instructions(
-        tasks
+    let instructions = |split| {
+        bench
+            .tasks(split)
             .iter()
-            .flat_map(|t| t.sequence.iter().map(|s| s.instruction.as_str())),
+            .flat_map(|t: &lhm_scenes::Task| t.sequence.iter().map(|s| s.instruction.clone()))
+            .collect::<Vec<String>>()
+    };
+    let train = instructions(lhm_scenes::Split::Train);
+    let vocabulary = lhm_sim::vla::Vocabulary::from_instructions(train.iter().map(String::as_str));
+    // What the unseen split's new sentence frames cost the tokenizer.
+    let (mut words, mut unknown) = (0usize, 0usize);
+    for text in instructions(lhm_scenes::Split::Unseen) {
+        for word in lhm_sim::vla::words(&text) {
+            words += 1;
+            unknown += usize::from(vocabulary.id(&word) == lhm_sim::vla::UNKNOWN);
+        }
+    }
+    tracing::info!(
+        "VLA vocabulary: {} words from {} training instructions; {unknown} of the unseen \
+         instructions' {words} words ({:.1} %) are unknown to it",
+        vocabulary.words.len(),
+        train.len(),
+        100.0 * unknown as f64 / words.max(1) as f64
     );
     Ok(vocabulary.words)
 }
@@ -139,6 +157,11 @@ impl Stage {
                 "stage {} takes no Teacher 2 (only the student is distilled from one)",
                 self.name()
             )));
+        }
+        // Only the VLA has an image encoder: a VLA section laid over every stage (a pipeline's
+        // --overlay) leaves the others state-based.
+        if self != Stage::Vla {
+            config.network.policy.vla = None;
         }
         let whole_tasks = |config: &mut TrainConfig| {
             if config.tasks == lhm_cluster::TaskSet::TrainSingleObject {
@@ -262,6 +285,38 @@ impl Stage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_vla_stage_labels_with_the_student_and_only_it_keeps_an_image_encoder() {
+        let mut vla = TrainConfig::default();
+        assert!(
+            Stage::Vla.apply(&mut vla, None, None).is_err(),
+            "needs a student"
+        );
+        let student = Path::new("runs/p/student/policy");
+        Stage::Vla.apply(&mut vla, Some(student), None).unwrap();
+        assert_eq!(vla.role, "vla");
+        assert!(!vla.amp_enabled);
+        assert_eq!(vla.teacher1.as_deref(), Some(student));
+        assert_eq!(vla.teacher2.as_deref(), Some(student));
+        assert_eq!(vla.dagger.capacity, VLA_DAGGER_CAPACITY);
+        let encoder = vla.network.policy.vla.clone().expect("the VLA encoder");
+        assert_eq!(encoder.proprio_dim, 226);
+        assert!(encoder.vocabulary.len() > 50, "{:?}", encoder.vocabulary);
+        assert!(encoder.vocabulary.iter().any(|w| w == "put"));
+        assert_eq!(vla.run_spec().obs_dim, encoder.obs_dim());
+        vla.check().unwrap();
+        // A VLA section laid over every stage stays with the vla stage only.
+        let mut t1 = TrainConfig::default();
+        t1.network.policy.vla = Some(encoder);
+        let mut refused = t1.clone();
+        refused.role = "teacher1".into();
+        let e = refused.check().unwrap_err().to_string();
+        assert!(e.contains("network.policy.vla"), "{e}");
+        Stage::T1.apply(&mut t1, None, None).unwrap();
+        assert!(t1.network.policy.vla.is_none());
+        t1.check().unwrap();
+    }
 
     #[test]
     fn each_stage_sets_its_role_start_and_reward() {
