@@ -812,12 +812,6 @@ pub fn run_learner(
     let mut spec = config.run_spec();
     spec.teacher_mix = optimiser.teacher_mix(learner.counters.iteration);
 
-    let session = lhm_cluster::open_session(NodeMode::Router, endpoints)?;
-    let served_teachers = teachers
-        .iter()
-        .map(|(role, t)| serve_teacher(&session, config, &spec, *role, t))
-        .collect::<Result<Vec<_>, _>>()?;
-    let policy_key = keys::policy(&config.run_id, role);
     let encode = |learner: &Learner, spec: &RunSpec| -> Result<Vec<u8>, ServiceError> {
         let msg = encode_policy(
             &config.run_id,
@@ -830,56 +824,18 @@ pub fn run_learner(
             .encode_checked()
             .map_err(lhm_cluster::ClusterError::from)?)
     };
-    let latest = Arc::new(Mutex::new(encode(&learner, &spec)?));
-    let latest_for_queries = Arc::clone(&latest);
-    let _queryable = session
-        .declare_queryable(&policy_key)
-        .callback(move |query| {
-            let bytes = latest_for_queries
-                .lock()
-                .map(|b| b.clone())
-                .unwrap_or_default();
-            if let Err(e) = query.reply(query.key_expr().clone(), bytes).wait() {
-                tracing::warn!("answering a weights query: {e}");
-            }
-        })
-        .wait()
-        .map_err(zerr)?;
-    // Weights are large and must never be dropped: Block, on their own (higher) priority.
-    let weights_pub = session
-        .declare_publisher(&policy_key)
-        .congestion_control(CongestionControl::Block)
-        .priority(Priority::DataHigh)
-        .wait()
-        .map_err(zerr)?;
-    let traj_sub = session
-        .declare_subscriber(keys::trajectory_all(&config.run_id, role))
-        .wait()
-        .map_err(zerr)?;
-    let episode_sub = session
-        .declare_subscriber(keys::episode_all(&config.run_id, role))
-        .wait()
-        .map_err(zerr)?;
+    let links = LearnerLinks::open(config, role, endpoints, encode(&learner, &spec)?)?;
+    let session = &links.session;
+    let served_teachers = teachers
+        .iter()
+        .map(|(role, t)| serve_teacher(session, config, &spec, *role, t))
+        .collect::<Result<Vec<_>, _>>()?;
     let mut recording = RunRecording::open(recording_path(&run_dir), config.scenes.as_deref());
     let mut metrics_csv = metrics_csv::MetricsCsv::open(&run_dir.join("metrics.csv"))
         .map_err(|e| tracing::warn!("no metrics.csv: {e}"))
         .ok();
     let run_started = Instant::now();
-    let alive_sub = session
-        .liveliness()
-        .declare_subscriber(keys::status_all(&config.run_id))
-        .history(true)
-        .wait()
-        .map_err(zerr)?;
-    let _token = session
-        .liveliness()
-        .declare_token(keys::status(&config.run_id, "learner"))
-        .wait()
-        .map_err(zerr)?;
-    weights_pub
-        .put(latest.lock().map(|b| b.clone()).unwrap_or_default())
-        .wait()
-        .map_err(zerr)?;
+    links.publish_latest()?;
     tracing::info!(
         "learner {} ({}) listening on {:?}, policy version {}",
         config.run_id,
@@ -909,21 +865,20 @@ pub fn run_learner(
         {
             break;
         }
-        while let Ok(Some(sample)) = alive_sub.try_recv() {
+        while let Ok(Some(sample)) = links.alive_sub.try_recv() {
             // A (re)joining process may have missed the last broadcast (e.g. it outlived a
             // learner restart and holds a newer version than the checkpoint): send again.
             republish |= book.liveliness(&config.run_id, &sample);
         }
         if republish && last_republish.elapsed() >= Duration::from_millis(500) {
-            let bytes = latest.lock().map(|b| b.clone()).unwrap_or_default();
-            weights_pub.put(bytes).wait().map_err(zerr)?;
+            links.publish_latest()?;
             for t in &served_teachers {
                 session.put(&t.key, t.bytes.clone()).wait().map_err(zerr)?;
             }
             republish = false;
             last_republish = Instant::now();
         }
-        while let Ok(Some(sample)) = episode_sub.try_recv() {
+        while let Ok(Some(sample)) = links.episode_sub.try_recv() {
             recording.episode(&sample.payload().to_bytes());
         }
         if last_status.elapsed() >= Duration::from_secs(1) {
@@ -931,7 +886,7 @@ pub fn run_learner(
             write_json_atomic(&status_path, &book.status(config, &learner, resumed))?;
             last_status = Instant::now();
         }
-        let Ok(Some(sample)) = traj_sub.recv_timeout(Duration::from_millis(100)) else {
+        let Ok(Some(sample)) = links.traj_sub.recv_timeout(Duration::from_millis(100)) else {
             continue;
         };
         let bytes = sample.payload().to_bytes();
@@ -983,11 +938,7 @@ pub fn run_learner(
         spec.teacher_mix = optimiser.teacher_mix(learner.counters.iteration);
         learner.counters.samples += n_steps as u64;
         book.steps_used += n_steps as u64;
-        let bytes = encode(&learner, &spec)?;
-        if let Ok(mut l) = latest.lock() {
-            *l = bytes.clone();
-        }
-        weights_pub.put(bytes).wait().map_err(zerr)?;
+        links.publish(encode(&learner, &spec)?)?;
         let it = learner.counters.iteration;
         // The last iteration of a budget is saved before status.json reports it: `lhm pipeline`
         // takes a stage whose status reached its budget as finished, checkpoint included.
@@ -1048,8 +999,108 @@ pub fn run_learner(
     let final_status = book.status(config, &learner, resumed);
     write_json_atomic(&status_path, &final_status)?;
     recording.finish();
-    let _ = session.close().wait();
+    drop(served_teachers);
+    links.close();
     Ok(final_status)
+}
+
+type SampleSubscriber =
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// The learner's side of the Zenoh wiring: its session (a router actors connect to), the policy
+/// key it publishes on and answers queries on with the latest weights, the trajectory and episode
+/// subscriptions, and the liveliness of everyone in the run.
+struct LearnerLinks {
+    session: zenoh::Session,
+    /// The newest encoded weights message: what queries are answered with and what is re-put.
+    latest: Arc<Mutex<Vec<u8>>>,
+    _queryable: zenoh::query::Queryable<()>,
+    weights_pub: zenoh::pubsub::Publisher<'static>,
+    traj_sub: SampleSubscriber,
+    episode_sub: SampleSubscriber,
+    alive_sub: SampleSubscriber,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+impl LearnerLinks {
+    fn open(
+        config: &TrainConfig,
+        role: Role,
+        endpoints: &Endpoints,
+        weights: Vec<u8>,
+    ) -> Result<Self, ServiceError> {
+        let session = lhm_cluster::open_session(NodeMode::Router, endpoints)?;
+        let policy_key = keys::policy(&config.run_id, role);
+        let latest = Arc::new(Mutex::new(weights));
+        let latest_for_queries = Arc::clone(&latest);
+        let queryable = session
+            .declare_queryable(&policy_key)
+            .callback(move |query| {
+                let bytes = latest_for_queries
+                    .lock()
+                    .map(|b| b.clone())
+                    .unwrap_or_default();
+                if let Err(e) = query.reply(query.key_expr().clone(), bytes).wait() {
+                    tracing::warn!("answering a weights query: {e}");
+                }
+            })
+            .wait()
+            .map_err(zerr)?;
+        // Weights are large and must never be dropped: Block, on their own (higher) priority.
+        let weights_pub = session
+            .declare_publisher(policy_key)
+            .congestion_control(CongestionControl::Block)
+            .priority(Priority::DataHigh)
+            .wait()
+            .map_err(zerr)?;
+        let traj_sub = session
+            .declare_subscriber(keys::trajectory_all(&config.run_id, role))
+            .wait()
+            .map_err(zerr)?;
+        let episode_sub = session
+            .declare_subscriber(keys::episode_all(&config.run_id, role))
+            .wait()
+            .map_err(zerr)?;
+        let alive_sub = session
+            .liveliness()
+            .declare_subscriber(keys::status_all(&config.run_id))
+            .history(true)
+            .wait()
+            .map_err(zerr)?;
+        let token = session
+            .liveliness()
+            .declare_token(keys::status(&config.run_id, "learner"))
+            .wait()
+            .map_err(zerr)?;
+        Ok(Self {
+            session,
+            latest,
+            _queryable: queryable,
+            weights_pub,
+            traj_sub,
+            episode_sub,
+            alive_sub,
+            _token: token,
+        })
+    }
+
+    /// Makes `bytes` the latest weights and publishes them.
+    fn publish(&self, bytes: Vec<u8>) -> Result<(), ServiceError> {
+        if let Ok(mut l) = self.latest.lock() {
+            l.clone_from(&bytes);
+        }
+        self.weights_pub.put(bytes).wait().map_err(zerr)
+    }
+
+    /// Publishes the latest weights again (for processes that may have missed them).
+    fn publish_latest(&self) -> Result<(), ServiceError> {
+        let bytes = self.latest.lock().map(|b| b.clone()).unwrap_or_default();
+        self.weights_pub.put(bytes).wait().map_err(zerr)
+    }
+
+    fn close(self) {
+        let _ = self.session.close().wait();
+    }
 }
 
 /// One row of `metrics.csv` for an iteration.
