@@ -116,7 +116,8 @@ enum BenchCommand {
     },
     /// The VLA's eyes on one core, per image size: env steps/s with the state observation vs
     /// with the VLA row (egocentric render + instruction), renders/s, the VLA policy's forward
-    /// rows/s (batches of 16), and the bytes a step adds to a chunk.
+    /// rows/s (batches of 16), its regression's rows/s (256-row minibatches), and the bytes a step
+    /// adds to a chunk.
     Vla {
         /// Print the report as JSON.
         #[arg(long)]
@@ -167,16 +168,17 @@ pub fn run(args: BenchArgs) -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&rows)?);
             } else {
                 println!(
-                    "| image | env steps/s (state obs) | env steps/s (VLA row) | renders/s | VLA forward rows/s | bytes/step |\n|---|---|---|---|---|---|"
+                    "| image | env steps/s (state obs) | env steps/s (VLA row) | renders/s | VLA forward rows/s | VLA train rows/s | bytes/step |\n|---|---|---|---|---|---|---|"
                 );
                 for r in rows {
                     println!(
-                        "| {0}x{0} | {1:.0} | {2:.0} | {3:.0} | {4:.0} | {5} |",
+                        "| {0}x{0} | {1:.0} | {2:.0} | {3:.0} | {4:.0} | {5:.0} | {6} |",
                         r.image_size,
                         r.state_steps_per_s,
                         r.vla_steps_per_s,
                         r.renders_per_s,
                         r.policy_rows_per_s,
+                        r.train_rows_per_s,
                         r.row_bytes
                     );
                 }

@@ -1,7 +1,8 @@
 //! `lhm bench vla`: what the VLA's eyes cost on one core, per image size: the environment's
 //! control steps/s with the state observation against with the VLA row (egocentric render,
 //! proprioception, instruction), the renders/s alone, the VLA policy's forward rows/s (a batch
-//! of 16, as an actor acts), and the bytes a step adds to a chunk. Medians over repetitions.
+//! of 16, as an actor acts), its regression's forward + backward rows/s (a 256-row minibatch, as
+//! the learner trains), and the bytes a step adds to a chunk. Medians over repetitions.
 
 use anyhow::{Context, Result};
 use lhm_actor::rollout::vla_view;
@@ -24,6 +25,9 @@ pub struct VlaBenchRow {
     pub renders_per_s: f64,
     /// VLA policy forward passes, rows/s, in batches of 16.
     pub policy_rows_per_s: f64,
+    /// The DAgger regression: forward, MSE loss and backward of the whole VLA policy on a
+    /// 256-row minibatch, rows/s.
+    pub train_rows_per_s: f64,
     /// f32 values of one VLA row (4 bytes each in a chunk).
     pub row_values: usize,
     pub row_bytes: usize,
@@ -88,6 +92,7 @@ pub fn run(sizes: &[usize], steps: usize, repetitions: usize) -> Result<Vec<VlaB
         let policy = ActorCritic::new(encoder.obs_dim(), model.dofs.len(), &network)?;
         let mut rng = SplitMix64::new(7);
         let (mut state, mut vla, mut renders, mut forward) = (vec![], vec![], vec![], vec![]);
+        let mut train = vec![];
         for _ in 0..repetitions.max(1) {
             state.push(steps_per_s(&fresh, steps, &mut rng, &|e| e.observation()));
             vla.push(steps_per_s(&fresh, steps, &mut rng, &|e| {
@@ -106,6 +111,8 @@ pub fn run(sizes: &[usize], steps: usize, repetitions: usize) -> Result<Vec<VlaB
                 std::hint::black_box(policy.act_deterministic(&batch)?);
             }
             forward.push((passes * 16) as f64 / started.elapsed().as_secs_f64());
+            let rows: Vec<f32> = (0..256).flat_map(|_| view.observation(&env)).collect();
+            train.push(256.0 / lhm_nets::vla::regression_step_seconds(&policy, &rows)?);
         }
         rows.push(VlaBenchRow {
             image_size: size,
@@ -113,6 +120,7 @@ pub fn run(sizes: &[usize], steps: usize, repetitions: usize) -> Result<Vec<VlaB
             vla_steps_per_s: median(vla),
             renders_per_s: median(renders),
             policy_rows_per_s: median(forward),
+            train_rows_per_s: median(train),
             row_values: encoder.obs_dim(),
             row_bytes: 4 * encoder.obs_dim(),
         });

@@ -3,8 +3,14 @@
 //! of the policy's MLP. Trained jointly, end to end, by the DAgger regression.
 //!
 //! An observation row is `[proprioception | word ids | image]` (the layout `lhm-sim`'s `vla`
-//! module writes): word ids as exact small integers in f32, the image channel-major in [0, 1].
-//! Only the proprioception goes through the observation normaliser; ids and pixels arrive raw.
+//! module writes): word ids as exact small integers in f32, the image row-major with interleaved
+//! RGB in [0, 1]. Only the proprioception goes through the observation normaliser; ids and pixels
+//! arrive raw.
+//!
+//! The CNN's layers are 2×2, stride-2 convolutions (patch merging, as in the patchify stems of
+//! ConvNeXt and Swin): each is a reshape of the image into its 2×2 patches and one matrix product,
+//! so forward and backward are matrix products. candle's CPU `conv2d` backward (a direct
+//! transposed convolution) made a 4×4 stride-2 stack train at ~60 rows/s on this machine.
 
 use candle_core::{DType, Device, Tensor, Var, D};
 use serde::{Deserialize, Serialize};
@@ -25,7 +31,7 @@ pub struct VlaEncoderConfig {
     /// from the training instructions by the learner and kept with the weights, so a checkpoint
     /// tokenises exactly as it was trained.
     pub vocabulary: Vec<String>,
-    /// Output channels of each 4×4, stride-2 convolution (each halves the image side).
+    /// Output channels of each 2×2, stride-2 convolution (each halves the image side).
     pub conv_channels: Vec<usize>,
     /// Width of the image features after the convolutions.
     pub image_features: usize,
@@ -98,14 +104,6 @@ impl VlaEncoderConfig {
     }
 }
 
-#[derive(Debug, Clone)]
-struct Conv {
-    /// [out, in, 4, 4]
-    weight: Var,
-    /// [out]
-    bias: Var,
-}
-
 /// A GRU cell (PyTorch's gate order r, z, n) whose input projection is applied to every step at
 /// once.
 #[derive(Debug, Clone)]
@@ -116,10 +114,37 @@ struct Gru {
     hidden: Linear,
 }
 
+/// Seconds of one regression step's gradient on `raw_rows` (normalise, policy mean, MSE against
+/// zero actions, backward): what a DAgger minibatch costs before Adam. For `lhm bench vla`.
+pub fn regression_step_seconds(ac: &crate::ActorCritic, raw_rows: &[f32]) -> NetResult<f64> {
+    let started = std::time::Instant::now();
+    let mean = ac.policy.mean(&ac.input_tensor(raw_rows)?)?;
+    let grads = mean.sqr()?.mean_all()?.backward()?;
+    std::hint::black_box(grads);
+    Ok(started.elapsed().as_secs_f64())
+}
+
+/// A 2×2, stride-2 convolution over NHWC activations `x` [B, S, S, C] → [B, S/2, S/2, O]: the
+/// image cut into its 2×2 patches (a reshape and a permute), then `layer` ([O, 4·C] weights, the
+/// patch's taps row-major, channels inner) on every patch.
+fn patch_merge(x: &Tensor, layer: &Linear) -> NetResult<Tensor> {
+    let (b, side, _, c) = x.dims4()?;
+    let half = side / 2;
+    let patches = x
+        .reshape((b, half, 2, half, 2 * c))?
+        .transpose(2, 3)?
+        .contiguous()?
+        .reshape((b * half * half, 4 * c))?;
+    Ok(layer
+        .forward(&patches)?
+        .reshape((b, half, half, layer.out_dim()))?)
+}
+
 #[derive(Debug, Clone)]
 pub struct VlaEncoder {
     config: VlaEncoderConfig,
-    convs: Vec<Conv>,
+    /// One per 2×2 stride-2 convolution: [out, 4 · in] weights.
+    convs: Vec<Linear>,
     image_out: Linear,
     /// [vocabulary, word_dim]
     words: Var,
@@ -136,18 +161,7 @@ impl VlaEncoder {
         let mut convs = Vec::new();
         let mut channels = 3;
         for &out in &config.conv_channels {
-            let fan_in = channels * 16;
-            let bound = 1.0 / (fan_in as f64).sqrt();
-            let w: Vec<f64> = (0..out * fan_in)
-                .map(|_| rng.uniform(-bound, bound))
-                .collect();
-            let b: Vec<f64> = (0..out).map(|_| rng.uniform(-bound, bound)).collect();
-            convs.push(Conv {
-                weight: Var::from_tensor(
-                    &Tensor::from_vec(w, (out, channels, 4, 4), &Device::Cpu)?.to_dtype(dtype)?,
-                )?,
-                bias: Var::from_tensor(&Tensor::from_vec(b, out, &Device::Cpu)?.to_dtype(dtype)?)?,
-            });
+            convs.push(Linear::new(4 * channels, out, 1.0, rng, dtype)?);
             channels = out;
         }
         let side = config.conv_side();
@@ -193,17 +207,13 @@ impl VlaEncoder {
         self.config.feature_dim()
     }
 
-    /// Image rows [B, 3·S·S] → features [B, image_features].
+    /// Image rows [B, S·S·3] (row-major, RGB interleaved) → features [B, image_features].
     fn image(&self, pixels: &Tensor) -> NetResult<Tensor> {
         let b = pixels.dim(0)?;
         let s = self.config.image_size;
-        let mut x = pixels.reshape((b, 3, s, s))?;
+        let mut x = pixels.reshape((b, s, s, 3))?;
         for conv in &self.convs {
-            let bias = conv.bias.as_tensor().reshape((1, (), 1, 1))?;
-            x = x
-                .conv2d(conv.weight.as_tensor(), 1, 2, 1, 1)?
-                .broadcast_add(&bias)?
-                .relu()?;
+            x = patch_merge(&x, conv)?.relu()?;
         }
         let flat = x.flatten_from(1)?;
         Ok(self.image_out.forward(&flat)?.relu()?)
@@ -266,14 +276,13 @@ impl VlaEncoder {
     /// `{prefix}.gru.{input,hidden}.*`.
     pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
         let mut vars = Vec::new();
-        for (i, conv) in self.convs.iter().enumerate() {
-            vars.push((format!("{prefix}.conv.{i}.weight"), conv.weight.clone()));
-            vars.push((format!("{prefix}.conv.{i}.bias"), conv.bias.clone()));
-        }
         let linear = |vars: &mut Vec<(String, Var)>, name: &str, l: &Linear| {
             vars.push((format!("{prefix}.{name}.weight"), l.weight.clone()));
             vars.push((format!("{prefix}.{name}.bias"), l.bias.clone()));
         };
+        for (i, conv) in self.convs.iter().enumerate() {
+            linear(&mut vars, &format!("conv.{i}"), conv);
+        }
         linear(&mut vars, "image", &self.image_out);
         vars.push((format!("{prefix}.words"), self.words.clone()));
         linear(&mut vars, "gru.input", &self.gru.input);
@@ -391,6 +400,37 @@ mod tests {
         assert_ne!(copy.act_deterministic(&rows).unwrap(), actions);
         copy.load_weights_safetensors(&bytes).unwrap();
         assert_eq!(copy.act_deterministic(&rows).unwrap(), actions);
+    }
+
+    #[test]
+    fn a_patch_merge_sees_exactly_its_two_by_two_patch() {
+        // One output channel that sums the patch's red values: weights 1 on taps' channel 0.
+        let mut rng = SplitMix64::new(3);
+        let layer = Linear::new(12, 1, 1.0, &mut rng, DType::F32).unwrap();
+        let w: Vec<f32> = (0..12)
+            .map(|i| if i % 3 == 0 { 1.0 } else { 0.0 })
+            .collect();
+        layer
+            .weight
+            .set(&Tensor::from_vec(w, (1, 12), &Device::Cpu).unwrap())
+            .unwrap();
+        layer
+            .bias
+            .set(&Tensor::zeros(1, DType::F32, &Device::Cpu).unwrap())
+            .unwrap();
+        // A 4 × 4 image whose red value is 10 · row + column.
+        let img: Vec<f32> = (0..16)
+            .flat_map(|p| [(10 * (p / 4) + p % 4) as f32, 0.5, 0.5])
+            .collect();
+        let x = Tensor::from_vec(img, (1, 4, 4, 3), &Device::Cpu).unwrap();
+        let y: Vec<f32> = patch_merge(&x, &layer)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        // Patch (0, 0): 0 + 1 + 10 + 11; (0, 1): 2 + 3 + 12 + 13; (1, 0): 20 + 21 + 30 + 31.
+        assert_eq!(y, vec![22.0, 30.0, 102.0, 110.0]);
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //!
 //! One flat row per step, so the VLA's chunks, DAgger dataset and checkpoints are the same
 //! machinery as every other policy's: `[proprioception | tokens | image]`, tokens as word ids
-//! (exact in f32), the image as `3 × size × size` channel-major values in [0, 1].
+//! (exact in f32), the image as `size × size` pixels row-major, RGB interleaved, in [0, 1].
 
 use serde::{Deserialize, Serialize};
 
@@ -152,18 +152,12 @@ impl VlaView {
     }
 }
 
-/// The head camera's image as channel-major values in [0, 1] (`3 × size × size`).
+/// The head camera's image in [0, 1]: `size × size` pixels row-major, RGB interleaved (the
+/// renderer's own layout).
 pub fn egocentric_image(env: &TaskEnv, size: usize) -> Vec<f32> {
     let camera = Camera::egocentric(&env.world, size as u32, size as u32);
     let image = render(&env.world, &camera, false);
-    let pixels = size * size;
-    let mut out = vec![0.0f32; 3 * pixels];
-    for (p, rgb) in image.rgb.chunks_exact(3).enumerate() {
-        for c in 0..3 {
-            out[c * pixels + p] = rgb[c] as f32 / 255.0;
-        }
-    }
-    out
+    image.rgb.iter().map(|&v| f32::from(v) / 255.0).collect()
 }
 
 #[cfg(test)]
