@@ -638,11 +638,18 @@ mod tests {
         ] {
             let c =
                 PipelineConfig::from_toml_file(&methods.join(format!("{method}.toml"))).unwrap();
-            assert_eq!(c.check().unwrap(), stages, "{method}");
+            // Every method ends with its VLA (Table 3).
+            let mut with_vla = stages.to_vec();
+            with_vla.push(Stage::Vla);
+            assert_eq!(c.check().unwrap(), with_vla, "{method}");
             assert_eq!(c.name, method);
-            // The same budget for every method, as the paper insists.
+            // The same budget for every method, as the paper insists (the VLA's 150 apart).
             assert_eq!(
-                c.stages.iter().map(|s| s.iterations).sum::<u64>(),
+                c.stages
+                    .iter()
+                    .filter(|s| s.stage != "vla")
+                    .map(|s| s.iterations)
+                    .sum::<u64>(),
                 1000,
                 "{method}"
             );
