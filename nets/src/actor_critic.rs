@@ -45,6 +45,20 @@ impl ActorCriticConfig {
     }
 }
 
+/// The first `lead` values of each `dim`-wide row.
+fn leading_columns(rows: &[f32], dim: usize, lead: usize) -> NetResult<Vec<f32>> {
+    if rows.len() % dim != 0 {
+        return Err(NetError::RaggedRows {
+            len: rows.len(),
+            width: dim,
+        });
+    }
+    Ok(rows
+        .chunks_exact(dim)
+        .flat_map(|row| row[..lead].iter().copied())
+        .collect())
+}
+
 /// One batch of acting: flat row-major actions, their log-probabilities, and state values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ActOutput {
@@ -141,16 +155,7 @@ impl ActorCritic {
         if lead == dim {
             return norm.normalize(raw_obs);
         }
-        if raw_obs.len() % dim != 0 {
-            return Err(NetError::RaggedRows {
-                len: raw_obs.len(),
-                width: dim,
-            });
-        }
-        let leading: Vec<f32> = raw_obs
-            .chunks_exact(dim)
-            .flat_map(|row| row[..lead].iter().copied())
-            .collect();
+        let leading = leading_columns(raw_obs, dim, lead)?;
         let whitened = norm.normalize(&leading)?;
         let mut out = raw_obs.to_vec();
         for (row, w) in out.chunks_exact_mut(dim).zip(whitened.chunks_exact(lead)) {
@@ -168,16 +173,7 @@ impl ActorCritic {
         if lead == dim {
             return norm.update(raw_obs);
         }
-        if raw_obs.len() % dim != 0 {
-            return Err(NetError::RaggedRows {
-                len: raw_obs.len(),
-                width: dim,
-            });
-        }
-        let leading: Vec<f32> = raw_obs
-            .chunks_exact(dim)
-            .flat_map(|row| row[..lead].iter().copied())
-            .collect();
+        let leading = leading_columns(raw_obs, dim, lead)?;
         norm.update(&leading)
     }
 
