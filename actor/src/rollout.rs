@@ -569,7 +569,7 @@ impl Rollout {
             self.env_steps += 1;
             slot.episode_len += 1;
             slot.episode_return += result.reward;
-            for (name, v) in result.terms.weighted(&slot.env.config.weights) {
+            for (name, v) in result.terms.weighted(&result.weights) {
                 *slot.episode_terms.entry(name.to_owned()).or_insert(0.0) += v;
             }
             let buf = &mut slot.buf;
@@ -579,9 +579,13 @@ impl Rollout {
             buf.log_probs.push(act.log_probs[i]);
             buf.values.push(act.values[i]);
             buf.rewards.push(result.reward);
-            buf.dones.push(result.done && !result.physics_invalid);
+            // A skill's part of the episode that ends (the Hierarchical RL baseline) is terminal
+            // for its return even where the episode's time runs out on the same step.
+            let skill_terminal = result.skill_ended && !result.physics_invalid;
+            buf.dones
+                .push((result.done || skill_terminal) && !result.physics_invalid);
             buf.truncated
-                .push(result.truncated || result.physics_invalid);
+                .push((result.truncated && !skill_terminal) || result.physics_invalid);
             buf.truncation_values.push(0.0);
             if self.spec.amp_dim > 0 {
                 let features = slot.env.amp_features();
@@ -612,7 +616,7 @@ impl Rollout {
                     demo_start: slot.env.demo_start,
                     reward_terms: std::mem::take(&mut slot.episode_terms),
                 };
-                if result.truncated && !result.physics_invalid {
+                if result.truncated && !result.physics_invalid && !skill_terminal {
                     truncated_obs.push((i, observe(self.view.as_ref(), &slot.env)));
                 }
                 slot.buf.episodes.push(stats.clone());

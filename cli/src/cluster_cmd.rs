@@ -54,7 +54,8 @@ pub struct LearnerOpts {
     /// --teacher1, and starts from that policy's weights unless --init-from says otherwise),
     /// `student` (DAgger distillation; needs --teacher1 and --teacher2), `vla` (the student
     /// distilled into an egocentric-RGB and language policy; needs --teacher1 the student's
-    /// policy), or the baselines' `e2e` and `curriculum`.
+    /// policy), or the baselines' `e2e`, `curriculum` and `hierarchical` (five skills switched
+    /// by a privileged state machine).
     #[arg(long)]
     stage: Option<String>,
     /// Where `scripts/install-motions` put the clips (default: $LHM_MOTION_DIR or ~/.cache/lhm/motions).

@@ -52,7 +52,8 @@ fn positive_scale(text: &str) -> Result<f64, String> {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StageConfig {
-    /// `t1`, `t1-rr`, `t2`, `student`, or the baselines' `e2e` and `curriculum`.
+    /// `t1`, `t1-rr`, `t2`, `student`, `vla`, or the baselines' `e2e`, `curriculum` and
+    /// `hierarchical`.
     pub stage: String,
     /// The stage's training configuration (a `lhm train --config` file, relative to the
     /// pipeline file); absent: the built-in default.
@@ -189,13 +190,17 @@ impl PipelineConfig {
                 Stage::Student => (!seen.contains(&Stage::T2))
                     .then_some("a t2 stage (and a Teacher 1 stage) before it"),
                 // Distilled from the deployable policy: the student, or a baseline's one policy.
-                Stage::Vla => (!seen
-                    .iter()
-                    .any(|s| matches!(s, Stage::Student | Stage::E2e | Stage::Curriculum)))
+                Stage::Vla => (!seen.iter().any(|s| {
+                    matches!(
+                        s,
+                        Stage::Student | Stage::E2e | Stage::Curriculum | Stage::Hierarchical
+                    )
+                }))
                 .then_some(
-                    "a student (or e2e, curriculum) stage before it: the VLA is distilled from it",
+                    "a student (or e2e, curriculum, hierarchical) stage before it: the VLA is \
+                     distilled from it",
                 ),
-                Stage::E2e => (!seen.is_empty())
+                Stage::E2e | Stage::Hierarchical => (!seen.is_empty())
                     .then_some("to be the only stage (it trains one policy from scratch)"),
                 Stage::Curriculum => (!seen.iter().any(|s| matches!(s, Stage::T1 | Stage::T1Rr)))
                     .then_some("a Teacher 1 stage (t1 or t1-rr) before it"),
@@ -293,7 +298,7 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
     let mut teacher2: Option<PathBuf> = None;
     let mut student: Option<PathBuf> = None;
     let mut vla: Option<PathBuf> = None;
-    // A baseline's one policy for every cycle (e2e, curriculum).
+    // A baseline's one policy for every cycle (e2e, curriculum, hierarchical).
     let mut single: Option<PathBuf> = None;
     let mut upstream_trained = false;
     for (spec, stage) in config.stages.iter().zip(&stages) {
@@ -380,7 +385,7 @@ pub fn run(args: PipelineArgs) -> Result<bool> {
             Stage::T2 => teacher2 = policy,
             Stage::Student => student = policy,
             Stage::Vla => vla = policy,
-            Stage::E2e | Stage::Curriculum => single = policy,
+            Stage::E2e | Stage::Curriculum | Stage::Hierarchical => single = policy,
         }
     }
     let policies = Policies {
@@ -635,6 +640,7 @@ mod tests {
             ),
             ("e2e-rl", &[Stage::E2e][..]),
             ("curriculum-rl", &[Stage::T1, Stage::Curriculum][..]),
+            ("hierarchical-rl", &[Stage::Hierarchical][..]),
         ] {
             let c =
                 PipelineConfig::from_toml_file(&methods.join(format!("{method}.toml"))).unwrap();

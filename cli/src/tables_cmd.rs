@@ -176,7 +176,9 @@ fn rows_of(dir: &Path, manifest: &Manifest, vla: bool) -> Vec<OurRow> {
     let teacher1 = stage_policy(dir, "t1-rr").or_else(|| stage_policy(dir, "t1"));
     let teacher2 = stage_policy(dir, "t2");
     let student = stage_policy(dir, "student");
-    let single = stage_policy(dir, "curriculum").or_else(|| stage_policy(dir, "e2e"));
+    let single = stage_policy(dir, "curriculum")
+        .or_else(|| stage_policy(dir, "e2e"))
+        .or_else(|| stage_policy(dir, "hierarchical"));
     let vla_policy = stage_policy(dir, "vla");
     let policies = if vla {
         Policies {

@@ -11,6 +11,7 @@ use crate::obs::{
 };
 use crate::task::cycles::{CycleTracker, Handoff, SwitchParams};
 use crate::task::rewards::{self, ReleaseRetreat, RewardWeights};
+use crate::task::skills::{self, Skill, SkillConfig, SkillEnd, SkillSituation};
 use crate::task::terminations::{fall_exempt, fallen, placement_error};
 use crate::world::{SimConfig, Snapshot, World};
 use lhm_scenes::geometry::Rect;
@@ -63,6 +64,12 @@ pub struct EnvConfig {
     /// start hands the policy a gait that open-loop replay loses within ~1 s (RESULTS.md, fourth
     /// session); tracking it says what to do at every step of that gait, DeepMimic-style.
     pub imitation_seconds: f32,
+    /// The Hierarchical RL baseline (`[env.skills]`): a privileged machine picks one of five
+    /// skills every step from the state ([`skills::select`]), the policy reads it as a one-hot
+    /// after the obstacle map, each step is paid the acting skill's own reward terms, and a
+    /// skill's part of the episode ends (terminal for the return, the world goes on) when the
+    /// machine moves on from it. `None`: the paper's task reward, no skill input.
+    pub skills: Option<SkillConfig>,
 }
 
 impl Default for EnvConfig {
@@ -88,13 +95,14 @@ impl Default for EnvConfig {
             carry_speed: 1.0,
             lift_height: 0.3,
             imitation_seconds: 3.0,
+            skills: None,
         }
     }
 }
 
 impl RewardTerms {
     /// Each term times its weight, by name (their sum is the step's task reward).
-    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 11] {
+    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 12] {
         [
             ("locomotion", w.locomotion * self.locomotion),
             ("facing", w.facing * self.facing),
@@ -107,6 +115,7 @@ impl RewardTerms {
             ("success", w.success * self.success),
             ("alive", w.alive * self.alive),
             ("imitation", w.imitation * self.imitation),
+            ("skill", w.skill * self.skill),
         ]
     }
 }
@@ -127,6 +136,8 @@ pub struct RewardTerms {
     pub success: f32,
     /// 1 on every step that does not end in a fall.
     pub alive: f32,
+    /// 1 on the step the skill machine moves on from the acting skill to a later one.
+    pub skill: f32,
 }
 
 #[derive(Clone, Debug)]
@@ -141,6 +152,12 @@ pub struct StepResult {
     /// The NaN/explosion guard tripped: this step's data must not be used.
     pub physics_invalid: bool,
     pub handoff: Handoff,
+    /// The weights this step's reward was paid with (the acting skill's under the skill
+    /// machine, else the configuration's).
+    pub weights: RewardWeights,
+    /// Under the skill machine: the acting skill's part of the episode ended on this step
+    /// (terminal for its return; the episode itself goes on unless `done`).
+    pub skill_ended: bool,
 }
 
 pub struct TaskEnv {
@@ -298,7 +315,14 @@ impl TaskEnv {
     }
 
     pub fn obs_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
-        proprioception_dim(model) + TASK_OBS_DIM + config.map_cells * config.map_cells
+        proprioception_dim(model)
+            + TASK_OBS_DIM
+            + config.map_cells * config.map_cells
+            + if config.skills.is_some() {
+                Skill::ALL.len()
+            } else {
+                0
+            }
     }
 
     pub fn amp_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
@@ -358,7 +382,43 @@ impl TaskEnv {
             self.config.map_cells,
             self.config.map_cell,
         ));
+        if self.config.skills.is_some() {
+            let skill = self.skill_at(&bodies).unwrap_or(Skill::Walk);
+            obs.extend(skills::one_hot(skill));
+        }
         obs
+    }
+
+    /// What the skill machine reads in `bodies` (this world's body states) for the current pair
+    /// (after the last handoff, the last pair).
+    fn skill_situation(&self, bodies: &[BodyState]) -> Option<SkillSituation> {
+        let last = self.task.sequence.len().saturating_sub(1);
+        let (i, goal, half) = self.pair(self.cycles.current.min(last))?;
+        let obj = self.object_state(i);
+        let root = bodies.first()?;
+        let flat = |v: Vector| Vector::new(v.x, v.y, 0.0).length();
+        let hand = |k: usize| {
+            let p = bodies[self.hands[k]].pos;
+            rewards::distance_to_box(obj.rot.inverse() * (p - obj.pos), half)
+        };
+        Some(SkillSituation {
+            root_to_object: flat(obj.pos - root.pos),
+            hands_to_object: [hand(0), hand(1)],
+            object_rise: obj.pos.z - self.start_z[i],
+            object_to_goal_flat: flat(goal - obj.pos),
+            object_to_goal: placement_error(obj.pos, goal),
+        })
+    }
+
+    /// The skill the machine picks in `bodies`; `None` without `[env.skills]` or a pair.
+    fn skill_at(&self, bodies: &[BodyState]) -> Option<Skill> {
+        let config = self.config.skills.as_ref()?;
+        Some(skills::select(&self.skill_situation(bodies)?, config))
+    }
+
+    /// The skill the machine picks now (`None` without `[env.skills]`).
+    pub fn current_skill(&self) -> Option<Skill> {
+        self.skill_at(&self.world.body_states())
     }
 
     /// The AMP frame the environment would record for its current state (velocities as backward
@@ -378,6 +438,7 @@ impl TaskEnv {
     }
 
     pub fn step(&mut self, action: &[f32]) -> StepResult {
+        let acting = self.current_skill();
         let targets = self.world.character.targets(action);
         let ok = self.world.step_targets(&targets);
         self.steps += 1;
@@ -390,6 +451,8 @@ impl TaskEnv {
                 fell: false,
                 physics_invalid: true,
                 handoff: Handoff::Done,
+                weights: self.config.weights,
+                skill_ended: false,
             };
         }
         let bodies = self.world.body_states();
@@ -444,11 +507,21 @@ impl TaskEnv {
         let fell = fallen(&heights, &self.exempt, self.config.fall_height)
             || bodies[0].pos.z < self.config.root_fall_height;
         terms.alive = if fell { 0.0 } else { 1.0 };
-        let reward = terms
-            .weighted(&self.config.weights)
-            .iter()
-            .map(|(_, v)| v)
-            .sum();
+        let mut weights = self.config.weights;
+        let mut skill_ended = false;
+        if let Some(acting) = acting {
+            weights = acting.reward_weights(&self.config.weights);
+            // A handoff to the next pair leaves the acting skill whatever the machine says of
+            // the new pair (its walk starts a new part).
+            let end = match self.skill_at(&bodies) {
+                _ if handoff == Handoff::Next => SkillEnd::Left,
+                Some(next) => skills::skill_end(acting, next),
+                None => SkillEnd::Left,
+            };
+            terms.skill = if end == SkillEnd::Completed { 1.0 } else { 0.0 };
+            skill_ended = end != SkillEnd::Continues;
+        }
+        let reward = terms.weighted(&weights).iter().map(|(_, v)| v).sum();
         let done = fell || handoff == Handoff::Done;
         StepResult {
             reward,
@@ -458,6 +531,8 @@ impl TaskEnv {
             fell,
             physics_invalid: false,
             handoff,
+            weights,
+            skill_ended,
         }
     }
 

@@ -168,3 +168,89 @@ fn pairs_hand_off_without_a_reset_when_objects_settle_on_their_goals() {
     );
     assert!((p - goal).length() < 0.05, "first object moved to {p:?}");
 }
+
+#[test]
+fn under_the_skill_machine_each_step_pays_the_acting_skill_and_a_skill_ends_when_it_moves_on() {
+    use lhm_sim::task::skills::Skill;
+    let mut config = EnvConfig {
+        fall_height: -1.0,
+        root_fall_height: -1.0,
+        skills: Some(Default::default()),
+        ..EnvConfig::default()
+    };
+    config.weights.release_retreat = 0.5;
+    let (model, mut env) = setup(config.clone());
+    let plain = EnvConfig::default();
+    assert_eq!(
+        TaskEnv::obs_dim(&model, &config),
+        TaskEnv::obs_dim(&model, &plain) + 5,
+        "the skill one-hot follows the obstacle map"
+    );
+    let obs = env.observation();
+    assert_eq!(obs.len(), TaskEnv::obs_dim(&model, &config));
+    assert_eq!(
+        env.current_skill(),
+        Some(Skill::Walk),
+        "objects start out of reach"
+    );
+    assert_eq!(&obs[obs.len() - 5..], &[1.0, 0.0, 0.0, 0.0, 0.0]);
+    let zero = vec![0.0; model.dofs.len()];
+    let r = env.step(&zero);
+    assert!(!r.skill_ended && r.terms.skill == 0.0);
+    assert_eq!(r.weights, Skill::Walk.reward_weights(&config.weights));
+    assert_eq!((r.weights.hands, r.weights.place), (0.0, 0.0));
+    let sum: f32 = r.terms.weighted(&r.weights).iter().map(|(_, v)| v).sum();
+    assert!((r.reward - sum).abs() < 1e-6);
+    // The object dropped onto its goal from 30 cm: once it lands, the machine moves on from
+    // walking to placing, which completes the acting skill (its bonus, terminal for its
+    // return) without ending the episode.
+    let step = env.task.sequence[0].clone();
+    let i = env.task.object_index(&step.object).expect("object");
+    let h = env.world.room.objects[i];
+    let body = &mut env.world.state.bodies[h];
+    body.set_position(
+        Pose::from_parts(
+            Vector::new(
+                step.goal[0] as f32,
+                step.goal[1] as f32,
+                step.goal[2] as f32 + 0.3,
+            ),
+            Rotation::from_rotation_z(step.goal_yaw as f32),
+        ),
+        true,
+    );
+    body.set_linvel(Vector::ZERO, true);
+    body.set_angvel(Vector::ZERO, true);
+    let mut landed = None;
+    for k in 0..60 {
+        assert_eq!(env.current_skill(), Some(Skill::Walk), "step {k}");
+        let r = env.step(&zero);
+        assert_eq!(r.weights, Skill::Walk.reward_weights(&config.weights));
+        if r.skill_ended {
+            landed = Some(r);
+            break;
+        }
+        assert_eq!(r.terms.skill, 0.0);
+    }
+    let r = landed.expect("the dropped object lands on its goal within 2 s");
+    assert!(r.terms.skill == 1.0 && !r.done, "{r:?}");
+    assert_eq!(env.current_skill(), Some(Skill::Place));
+    let obs = env.observation();
+    assert_eq!(&obs[obs.len() - 5..], &[0.0, 0.0, 0.0, 0.0, 1.0]);
+    // Placing until the cycle hands off: paid for placing, and the handoff leaves the skill
+    // (no bonus: the cycle's own success pays) for the next pair's walk.
+    let mut handed_off = false;
+    for _ in 0..100 {
+        let r = env.step(&zero);
+        assert_eq!(r.weights, Skill::Place.reward_weights(&config.weights));
+        assert!(r.weights.place > 0.0 && r.weights.locomotion == 0.0);
+        if r.handoff == Handoff::Next {
+            assert!(r.skill_ended && r.terms.skill == 0.0 && r.terms.success == 1.0);
+            handed_off = true;
+            break;
+        }
+        assert!(!r.skill_ended, "placing goes on until the handoff");
+    }
+    assert!(handed_off, "the placed pair never handed off");
+    assert_eq!(env.current_skill(), Some(Skill::Walk));
+}

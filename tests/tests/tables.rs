@@ -9,7 +9,14 @@ use std::process::Command;
 
 use lhm_e2e::{lhm, scratch_dir};
 
-const METHODS: &[&str] = &["lhm", "no-rr", "no-amp", "e2e-rl", "curriculum-rl"];
+const METHODS: &[&str] = &[
+    "lhm",
+    "no-rr",
+    "no-amp",
+    "e2e-rl",
+    "curriculum-rl",
+    "hierarchical-rl",
+];
 
 fn run(args: &[&str]) -> String {
     let out = Command::new(lhm())
@@ -73,6 +80,7 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
         "LHM w/o AMP-S",
         "End-to-End RL",
         "Curriculum RL",
+        "Hierarchical RL",
     ];
     // Table 3: every method's VLA, with and without its instructions.
     let vla_rows: Vec<String> = [
@@ -81,6 +89,7 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
         "LHM w/o AMP",
         "End-to-End RL",
         "Curriculum RL",
+        "Hierarchical RL",
     ]
     .iter()
     .flat_map(|m| [format!("{m} (VLA)"), format!("{m} (VLA, no language)")])
@@ -135,9 +144,9 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
             assert!(header.contains(column), "{file}: no {column}: {header}");
         }
         let (expected, ours): (Vec<&str>, usize) = if file == "table3-vla" {
-            (vla_rows.iter().map(String::as_str).collect(), 10)
+            (vla_rows.iter().map(String::as_str).collect(), 12)
         } else {
-            (rows.to_vec(), 8)
+            (rows.to_vec(), 9)
         };
         for row in expected {
             let line = md
@@ -148,7 +157,8 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
             assert!(line.matches(" ± ").count() >= columns.len(), "{line}");
         }
         // The paper's figures beside ours, and its rows we do not run.
-        assert!(md.contains("Hierarchical RL (not run here)"), "{md}");
+        assert!(md.contains("TokenHSI (not run here)"), "{md}");
+        assert!(!md.contains("Hierarchical RL (not run here)"), "{md}");
         if file == "table1-train" {
             assert!(md.contains("88.8 / 72.9 / 72.4 / 0.25 / 0.48"), "{md}");
         }
@@ -171,6 +181,6 @@ fn every_method_trains_and_the_tables_have_every_row_and_column() {
     // Every evaluation is reused the second time.
     let again = run(&args);
     assert!(!again.contains("evaluating"), "{again}");
-    assert_eq!(again.matches("reusing").count(), 8 * 3 + 10, "{again}");
+    assert_eq!(again.matches("reusing").count(), 9 * 3 + 12, "{again}");
     let _ = std::fs::remove_dir_all(&dir);
 }

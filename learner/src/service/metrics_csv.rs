@@ -46,6 +46,8 @@ pub const COLUMNS: &[&str] = &[
     "student_loss",
     "dagger_rows",
     "dagger_rounds",
+    // The Hierarchical RL baseline's skill completions (0 without the skill machine).
+    "reward_skill",
 ];
 
 pub struct MetricsCsv {

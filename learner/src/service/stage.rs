@@ -38,6 +38,13 @@ pub enum Stage {
     /// by PPO (+AMP) on whole two-object tasks, so one policy learns every cycle.
     #[serde(rename = "curriculum")]
     Curriculum,
+    /// Baseline "Hierarchical RL": five low-level skills (walk, reach-and-grasp, lift, carry,
+    /// place-and-release) switched by a privileged state machine (`[env.skills]`), each paid its
+    /// own reward terms and ended when the machine moves on, trained by PPO (+AMP) from scratch
+    /// on whole two-object tasks. The skills share one network that reads the machine's choice
+    /// as a one-hot (ASE/TokenHSI-style skill conditioning) instead of five separate networks.
+    #[serde(rename = "hierarchical")]
+    Hierarchical,
 }
 
 /// DAgger rows a `vla` stage keeps unless its configuration sets `dagger.capacity`.
@@ -79,7 +86,7 @@ pub fn training_vocabulary(scenes: Option<&Path>) -> Result<Vec<String>, Service
 }
 
 impl Stage {
-    pub const ALL: [Stage; 7] = [
+    pub const ALL: [Stage; 8] = [
         Stage::T1,
         Stage::T1Rr,
         Stage::T2,
@@ -87,6 +94,7 @@ impl Stage {
         Stage::Vla,
         Stage::E2e,
         Stage::Curriculum,
+        Stage::Hierarchical,
     ];
 
     pub fn name(self) -> &'static str {
@@ -98,17 +106,20 @@ impl Stage {
             Stage::Vla => "vla",
             Stage::E2e => "e2e",
             Stage::Curriculum => "curriculum",
+            Stage::Hierarchical => "hierarchical",
         }
     }
 
-    /// `t1`, `t1-rr`, `t2`, `student`, `vla`, or the baselines' `e2e` and `curriculum`.
+    /// `t1`, `t1-rr`, `t2`, `student`, `vla`, or the baselines' `e2e`, `curriculum` and
+    /// `hierarchical`.
     pub fn parse(text: &str) -> Result<Self, ServiceError> {
         Self::ALL
             .into_iter()
             .find(|s| s.name() == text)
             .ok_or_else(|| {
                 ServiceError::Config(format!(
-                    "stage {text:?} is not one of t1, t1-rr, t2, student, vla, e2e, curriculum"
+                    "stage {text:?} is not one of t1, t1-rr, t2, student, vla, e2e, curriculum, \
+                     hierarchical"
                 ))
             })
     }
@@ -138,6 +149,9 @@ impl Stage {
     ///   tasks, whole episodes, unless the configuration lists other tasks.
     /// - `curriculum`: role teacher1 initialised like `t1-rr` (the configuration's `init_from`,
     ///   else `teacher1`), on the two-object training tasks unless the configuration lists others.
+    /// - `hierarchical`: `e2e` with the skill machine on (the configuration's `[env.skills]`, or
+    ///   the defaults) and, unless the configuration sets a positive one, release-and-retreat
+    ///   weight [`DEFAULT_RELEASE_RETREAT_WEIGHT`] (place-and-release is paid for letting go).
     pub fn apply(
         self,
         config: &mut TrainConfig,
@@ -169,15 +183,22 @@ impl Stage {
             }
         };
         match self {
-            Stage::E2e => {
+            Stage::E2e | Stage::Hierarchical => {
                 if let Some(t) = teacher1 {
                     return Err(ServiceError::Config(format!(
-                        "stage e2e trains one policy from scratch; it takes no Teacher 1 ({})",
+                        "stage {} trains from scratch; it takes no Teacher 1 ({})",
+                        self.name(),
                         t.display()
                     )));
                 }
                 config.role = "teacher1".into();
                 whole_tasks(config);
+                if self == Stage::Hierarchical {
+                    config.env.skills.get_or_insert_with(Default::default);
+                    if config.env.weights.release_retreat == 0.0 {
+                        config.env.weights.release_retreat = DEFAULT_RELEASE_RETREAT_WEIGHT;
+                    }
+                }
             }
             Stage::Curriculum => {
                 let from: PathBuf = match (&config.init_from, teacher1) {
@@ -405,6 +426,36 @@ mod tests {
             c.tasks,
             lhm_cluster::TaskSet::Split(lhm_scenes::Split::Train)
         );
+        // Hierarchical RL: e2e with the skill machine, its one-hot in the policy's input, and
+        // place-and-release paid for letting go; a configured machine and weight are kept.
+        let mut h = TrainConfig::default();
+        assert!(Stage::Hierarchical
+            .apply(&mut h, Some(Path::new("runs/p/t1/policy")), None)
+            .is_err());
+        Stage::Hierarchical.apply(&mut h, None, None).unwrap();
+        assert_eq!(
+            (h.role.as_str(), h.init_from.as_deref()),
+            ("teacher1", None)
+        );
+        assert_eq!(h.env.skills, Some(Default::default()));
+        assert_eq!(
+            h.env.weights.release_retreat,
+            DEFAULT_RELEASE_RETREAT_WEIGHT
+        );
+        assert_eq!(
+            h.run_spec().obs_dim,
+            TrainConfig::default().run_spec().obs_dim + 5
+        );
+        h.check().unwrap();
+        let mut tuned = TrainConfig::default();
+        tuned.env.skills = Some(lhm_sim::task::skills::SkillConfig {
+            grasp_distance: 0.05,
+            ..Default::default()
+        });
+        tuned.env.weights.release_retreat = 0.2;
+        Stage::Hierarchical.apply(&mut tuned, None, None).unwrap();
+        assert_eq!(tuned.env.skills.map(|s| s.grasp_distance), Some(0.05));
+        assert_eq!(tuned.env.weights.release_retreat, 0.2);
     }
 
     #[test]

@@ -3,4 +3,5 @@
 
 pub mod cycles;
 pub mod rewards;
+pub mod skills;
 pub mod terminations;

@@ -212,6 +212,9 @@ pub struct RewardWeights {
     /// Tracking the clip a demo start came from ([`imitation`]) for `EnvConfig::imitation_seconds`
     /// after the start; 0 (off) by default.
     pub imitation: f32,
+    /// One-off reward on the step a Hierarchical-RL skill hands over to the next one (its
+    /// completion); paid only under the skill machine (`EnvConfig::skills`).
+    pub skill: f32,
 }
 
 impl Default for RewardWeights {
@@ -232,6 +235,7 @@ impl Default for RewardWeights {
             // 0.5 (x the learner's task weight 0.5): survival now pays 0.25 per step.
             alive: 0.5,
             imitation: 0.0,
+            skill: 5.0,
         }
     }
 }
