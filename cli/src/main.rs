@@ -15,6 +15,7 @@ mod scenes_cmd;
 mod tables_cmd;
 mod train_bench;
 mod vla_bench;
+mod vla_probe_cmd;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -64,6 +65,9 @@ enum Command {
     /// Make a recording cut short by a crash (SIGKILL, power loss) readable again: copies every
     /// complete record into a new, properly finished MCAP file.
     Recover(record_cmd::RecoverArgs),
+    /// How closely a VLA policy reproduces the policy it was distilled from, with and without
+    /// its instructions, along its own rollouts on each split.
+    VlaProbe(vla_probe_cmd::VlaProbeArgs),
 }
 
 /// candle allocates a fresh buffer per tensor op and glibc serves large ones with mmap, so every
@@ -126,6 +130,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => eval_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Tables(args) => tables_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Recover(args) => record_cmd::recover(args).map(|()| ExitCode::SUCCESS),
+        Command::VlaProbe(args) => vla_probe_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Scenes(args) => scenes_cmd::run(args),
         Command::Bench(args) => bench_cmd::run(args).map(|()| ExitCode::SUCCESS),
         Command::Motion(args) => motion_cmd::run(args).map(|()| ExitCode::SUCCESS),
