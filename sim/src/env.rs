@@ -418,6 +418,8 @@ impl TaskEnv {
 
     /// The skill the machine picks now (`None` without `[env.skills]`).
     pub fn current_skill(&self) -> Option<Skill> {
+        // Checked first: without the machine a step should not pay for the body states.
+        self.config.skills.as_ref()?;
         self.skill_at(&self.world.body_states())
     }
 
