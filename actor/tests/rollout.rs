@@ -320,3 +320,77 @@ fn a_student_rollout_records_teacher_labels_and_mixes_by_beta() {
     assert_eq!(stages[0], lhm_protos::Stage::FirstCycle);
     assert!(stages.contains(&lhm_protos::Stage::NextCycle), "{stages:?}");
 }
+
+/// Under the Hierarchical RL baseline's skill machine, a skill's part of an episode that ends is
+/// terminal in the chunk (no bootstrap across it) while the episode itself goes on: here the
+/// first pair's object starts on its goal, so the place-and-release skill acts until the cycle
+/// hands off to the second pair, which leaves it.
+#[test]
+fn a_skill_that_ends_is_terminal_in_the_chunk_and_the_episode_goes_on() {
+    let mut bench = Benchmark::embedded().unwrap();
+    let model = CharacterModel::amp_humanoid();
+    let tasks = &mut bench
+        .splits
+        .get_mut(&lhm_scenes::Split::Train)
+        .unwrap()
+        .tasks;
+    let task = tasks
+        .iter_mut()
+        .find(|t| t.sequence.len() >= 2)
+        .expect("a two-object task");
+    let first = task.sequence[0].clone();
+    let object = task
+        .objects
+        .iter_mut()
+        .find(|o| o.id == first.object)
+        .unwrap();
+    object.pos = first.goal;
+    object.yaw = first.goal_yaw;
+    let id = task.id.clone();
+    let chunk = |skills: bool| {
+        let env = EnvConfig {
+            fall_height: -1.0,
+            root_fall_height: -1.0,
+            skills: skills.then(Default::default),
+            ..EnvConfig::default()
+        };
+        let spec = RunSpec {
+            obs_dim: TaskEnv::obs_dim(&model, &env),
+            act_dim: model.dofs.len(),
+            amp_dim: TaskEnv::amp_dim(&model, &env),
+            actor_critic: ActorCriticConfig::with_hidden(&[16]),
+            env,
+            sim: SimConfig::default(),
+            tasks: TaskSet::Ids(vec![id.clone()]),
+            chunk_steps: 40,
+            record_every_episodes: 0,
+            chunk_sets_per_version: 0,
+            teacher_mix: 0.0,
+        };
+        let ac = ActorCritic::new(spec.obs_dim, spec.act_dim, &spec.actor_critic).unwrap();
+        let mut rollout = Rollout::new(spec, &bench, "run", "a", Role::Teacher1, 1, 3).unwrap();
+        let mut chunks = Vec::new();
+        for _ in 0..40 {
+            let out = rollout.step(&ac, 1).unwrap();
+            assert!(out.finished.is_empty(), "no episode ends in 40 steps");
+            chunks.extend(out.chunks);
+        }
+        assert_eq!(chunks.len(), 1);
+        chunks.remove(0)
+    };
+    let with = chunk(true);
+    let ends: Vec<usize> = (0..40).filter(|&i| with.dones[i]).collect();
+    assert_eq!(
+        ends.len(),
+        1,
+        "one skill end, at the handoff: {:?}",
+        with.dones
+    );
+    assert!(ends[0] >= 14, "the hold takes 15 steps: {ends:?}");
+    assert!(!with.truncated[ends[0]] && with.episodes.is_empty());
+    // The skill completion pays nothing here (the machine went back, to the next pair's walk);
+    // the cycle's success does.
+    assert!(with.rewards[ends[0]] > 10.0, "{}", with.rewards[ends[0]]);
+    let without = chunk(false);
+    assert!(without.dones.iter().all(|d| !d), "no skills, no ends");
+}
