@@ -7,6 +7,7 @@ pub mod dagger;
 pub mod error;
 pub mod gae;
 pub mod ppo;
+pub mod sac;
 pub mod service;
 pub mod state;
 

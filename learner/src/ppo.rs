@@ -34,8 +34,9 @@ pub struct PpoConfig {
     pub seed: u64,
     /// KL-adaptive learning rate (rl_games' `lr_schedule: adaptive`, `kl_threshold`): after each
     /// epoch, the Adam learning rate is divided by 1.5 when the epoch's mean approx-KL is above
-    /// twice this, and multiplied by 1.5 when below half of it, within [1e-6, 1e-2]. `None`
-    /// (absent from a config file): a constant rate, as IsaacGymEnvs' HumanoidAMP trains.
+    /// twice this, and multiplied by 1.5 when below half of it, within [1e-6, 1e-2]. `None` or
+    /// 0 (`kl_target = 0.0` in a config file, which lays its keys over defaults that may set one):
+    /// a constant rate, as IsaacGymEnvs' HumanoidAMP trains.
     #[serde(default)]
     pub kl_target: Option<f64>,
 }
@@ -149,6 +150,13 @@ pub struct PpoLosses {
 
 impl PpoTrainer {
     pub fn new(config: PpoConfig, ac: &ActorCritic) -> LearnerResult<Self> {
+        if let Some(t) = config.kl_target {
+            if t.is_nan() || t.is_infinite() || t < 0.0 {
+                return Err(LearnerError::Invalid(format!(
+                    "ppo.kl_target must be a finite number >= 0 (0.0 turns it off), got {t}"
+                )));
+            }
+        }
         let vars: Vec<Var> = ac.named_vars().into_iter().map(|(_, v)| v).collect();
         let adam = Adam::new(config.adam.clone(), &vars)?;
         let rng = SplitMix64::new(config.seed);
@@ -278,7 +286,7 @@ impl PpoTrainer {
                 sums.total_loss += scalar(&losses.total)?;
                 sums.minibatches += 1;
             }
-            if let Some(target) = self.config.kl_target {
+            if let Some(target) = self.config.kl_target.filter(|&t| t > 0.0) {
                 let epoch_kl = (sums.approx_kl - kl_before)
                     / (sums.minibatches - minibatches_before).max(1) as f64;
                 self.adam.config.lr = adapt_lr(self.adam.config.lr, epoch_kl, target);
@@ -431,5 +439,22 @@ mod tests {
         assert!((lr_after(Some(1e-12)) - 1.5f64.powi(-3)).abs() < 1e-9);
         assert!((lr_after(Some(1e3)) - 1.5f64.powi(3)).abs() < 1e-9);
         assert_eq!(lr_after(None), 1.0);
+        assert_eq!(lr_after(Some(0.0)), 1.0);
+    }
+
+    /// A negative or NaN KL target is refused, naming the field.
+    #[test]
+    fn a_negative_kl_target_is_refused() {
+        let ac = ActorCritic::new(4, 2, &ActorCriticConfig::with_hidden(&[8])).unwrap();
+        for bad in [-0.01, f64::NAN] {
+            let config = PpoConfig {
+                kl_target: Some(bad),
+                ..PpoConfig::default()
+            };
+            let Err(err) = PpoTrainer::new(config, &ac) else {
+                panic!("a kl_target of {bad} was accepted");
+            };
+            assert!(err.to_string().contains("ppo.kl_target"), "{err}");
+        }
     }
 }

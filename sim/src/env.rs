@@ -515,11 +515,12 @@ impl TaskEnv {
             weights = acting.reward_weights(&self.config.weights);
             // A handoff to the next pair leaves the acting skill whatever the machine says of
             // the new pair (its walk starts a new part).
-            let end = match self.skill_at(&bodies) {
-                _ if handoff == Handoff::Next => SkillEnd::Left,
-                Some(next) => skills::skill_end(acting, next),
-                None => SkillEnd::Left,
+            let next = if handoff == Handoff::Next {
+                None
+            } else {
+                self.skill_at(&bodies)
             };
+            let end = next.map_or(SkillEnd::Left, |next| skills::skill_end(acting, next));
             terms.skill = if end == SkillEnd::Completed { 1.0 } else { 0.0 };
             skill_ended = end != SkillEnd::Continues;
         }
