@@ -185,7 +185,7 @@ impl Sac {
     }
 
     pub fn alpha(&self) -> LearnerResult<f64> {
-        Ok(scalar(&self.log_alpha.as_tensor().exp()?.sum_all()?)?)
+        scalar(&self.log_alpha.as_tensor().exp()?.sum_all()?)
     }
 
     /// Folds raw observations into the normaliser (call with what the environments produce).
