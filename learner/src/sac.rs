@@ -106,13 +106,19 @@ pub struct Sac {
     actor_adam: Adam,
     critic_adam: Adam,
     alpha_adam: Adam,
+    /// Parameter lists, built once: the actor's, both critics' (q1 then q2) and their targets'
+    /// in the same order.
+    actor_vars: Vec<Var>,
+    critic_vars: Vec<Var>,
+    target_vars: Vec<Var>,
     pub obs_norm: RunningMeanStd,
     rng: SplitMix64,
 }
 
-fn copy_into(target: &Mlp, source: &Mlp) -> LearnerResult<()> {
-    for ((_, t), (_, s)) in target.named_vars("").iter().zip(source.named_vars("")) {
-        t.set(s.as_tensor())?;
+/// target ← (1 − τ) target + τ source, parameter by parameter (τ = 1 copies).
+fn polyak(targets: &[Var], sources: &[Var], tau: f64) -> LearnerResult<()> {
+    for (t, s) in targets.iter().zip(sources) {
+        t.set(&((t.as_tensor() * (1.0 - tau))? + (s.as_tensor() * tau)?)?)?;
     }
     Ok(())
 }
@@ -143,14 +149,16 @@ impl Sac {
             |rng: &mut SplitMix64| Mlp::new(obs_dim + act_dim, 1, &config.critic, 1.0, rng, f);
         let (q1, q2) = (critic(&mut rng)?, critic(&mut rng)?);
         let (q1_target, q2_target) = (critic(&mut rng)?, critic(&mut rng)?);
-        copy_into(&q1_target, &q1)?;
-        copy_into(&q2_target, &q2)?;
+        let actor_vars = Self::vars(&[&actor]);
+        let critic_vars = Self::vars(&[&q1, &q2]);
+        let target_vars = Self::vars(&[&q1_target, &q2_target]);
+        polyak(&target_vars, &critic_vars, 1.0)?;
         let log_alpha = Var::from_tensor(&Tensor::new(
             &[config.initial_alpha.ln() as f32],
             &Device::Cpu,
         )?)?;
-        let actor_adam = Adam::new(config.actor_adam.clone(), &Self::vars(&[&actor]))?;
-        let critic_adam = Adam::new(config.critic_adam.clone(), &Self::vars(&[&q1, &q2]))?;
+        let actor_adam = Adam::new(config.actor_adam.clone(), &actor_vars)?;
+        let critic_adam = Adam::new(config.critic_adam.clone(), &critic_vars)?;
         let alpha_adam = Adam::new(config.alpha_adam.clone(), std::slice::from_ref(&log_alpha))?;
         Ok(Self {
             obs_norm: RunningMeanStd::new(obs_dim),
@@ -167,6 +175,9 @@ impl Sac {
             actor_adam,
             critic_adam,
             alpha_adam,
+            actor_vars,
+            critic_vars,
+            target_vars,
         })
     }
 
@@ -282,18 +293,16 @@ impl Sac {
         let q2 = self.q2.forward(&input)?;
         let critic_loss =
             ((&q1 - &target)?.sqr()?.mean_all()? + (&q2 - &target)?.sqr()?.mean_all()?)?;
-        let critic_vars = Self::vars(&[&self.q1, &self.q2]);
-        let grads = gradients(&critic_vars, &critic_loss.backward()?)?;
-        self.critic_adam.step(&critic_vars, &grads)?;
+        let grads = gradients(&self.critic_vars, &critic_loss.backward()?)?;
+        self.critic_adam.step(&self.critic_vars, &grads)?;
 
         // Actor: minimise α log π(a|s) − min Q(s, a) over fresh actions (the critics' own
         // gradients from this loss are computed and dropped).
         let (action, log_prob) = self.sample(&x)?;
         let q = Self::q_min(&self.q1, &self.q2, &x, &action)?;
         let actor_loss = ((&log_prob * alpha)? - &q)?.mean_all()?;
-        let actor_vars = Self::vars(&[&self.actor]);
-        let grads = gradients(&actor_vars, &actor_loss.backward()?)?;
-        self.actor_adam.step(&actor_vars, &grads)?;
+        let grads = gradients(&self.actor_vars, &actor_loss.backward()?)?;
+        self.actor_adam.step(&self.actor_vars, &grads)?;
 
         // Temperature: d/d log α of −log α · (log π + H̄) is −(mean log π + H̄).
         let mean_log_prob = scalar(&log_prob.mean_all()?)?;
@@ -302,13 +311,7 @@ impl Sac {
         self.alpha_adam
             .step(std::slice::from_ref(&self.log_alpha), &[vec![g]])?;
 
-        let tau = self.config.tau;
-        for (target, source) in [(&self.q1_target, &self.q1), (&self.q2_target, &self.q2)] {
-            for ((_, t), (_, s)) in target.named_vars("").iter().zip(source.named_vars("")) {
-                let mixed = ((t.as_tensor() * (1.0 - tau))? + (s.as_tensor() * tau)?)?;
-                t.set(&mixed)?;
-            }
-        }
+        polyak(&self.target_vars, &self.critic_vars, self.config.tau)?;
         Ok(SacStats {
             critic_loss: scalar(&critic_loss)?,
             actor_loss: scalar(&actor_loss)?,
