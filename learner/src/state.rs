@@ -73,7 +73,15 @@ struct LearnerMeta {
     /// in older checkpoints, which had a constant rate.
     #[serde(default)]
     ppo_lr: Option<f64>,
+    /// Whether the weights file holds the PPO Adam moments: a full checkpoint does, a policy file
+    /// (what actors and users load) does not; absent in older files, which always held them.
+    #[serde(default = "holds_moments")]
+    ppo_moments: bool,
     amp: Option<AmpMeta>,
+}
+
+fn holds_moments() -> bool {
+    true
 }
 
 const REPLAY_TENSOR: &str = "amp.replay.features";
@@ -135,21 +143,24 @@ impl Learner {
         })
     }
 
-    /// The actor-critic's parameters and their Adam moments, under their checkpoint names.
-    fn policy_tensors(&self) -> LearnerResult<Vec<(String, Tensor)>> {
-        let ac_vars = self.actor_critic.named_vars();
-        let mut tensors: Vec<(String, Tensor)> = ac_vars
+    /// The actor-critic's parameters under their checkpoint names.
+    fn policy_tensors(&self) -> Vec<(String, Tensor)> {
+        self.actor_critic
+            .named_vars()
             .iter()
             .map(|(n, v)| (n.clone(), v.as_tensor().clone()))
-            .collect();
-        tensors.extend(moment_tensors("optim.ppo", &ac_vars, &self.ppo.adam)?);
-        Ok(tensors)
+            .collect()
     }
 
     /// Every tensor of the state under its checkpoint name: `policy.*`, `value.*`, `disc.*`,
     /// `optim.ppo.{m,v}.<param>`, `optim.amp.{m,v}.<param>`, `amp.replay.features`.
     pub fn named_tensors(&self) -> LearnerResult<Vec<(String, Tensor)>> {
-        let mut tensors = self.policy_tensors()?;
+        let mut tensors = self.policy_tensors();
+        tensors.extend(moment_tensors(
+            "optim.ppo",
+            &self.actor_critic.named_vars(),
+            &self.ppo.adam,
+        )?);
         if let Some(amp) = &self.amp {
             let disc_vars = amp.disc.named_vars("disc");
             tensors.extend(
@@ -178,6 +189,7 @@ impl Learner {
             ppo_adam_step: self.ppo.adam.step_count(),
             ppo_rng: self.ppo.rng.clone(),
             ppo_lr: Some(self.ppo.adam.config.lr),
+            ppo_moments: true,
             amp: self.amp.as_ref().map(|amp| AmpMeta {
                 adam_step: amp.adam.step_count(),
                 rng: amp.rng.clone(),
@@ -194,15 +206,18 @@ impl Learner {
         Ok(())
     }
 
-    /// Writes the policy alone (actor-critic, its normaliser and optimiser state; no
-    /// discriminator, no replay buffer) to `<stem>.{safetensors,json}`: a few MB that actors,
-    /// `lhm record` and `lhm render-rollout` load with [`Self::load`], and that can be committed.
-    /// Training resumes from the full checkpoint, not from this.
+    /// Writes the policy alone (the actor-critic's weights and normalisers; no optimiser
+    /// moments, no discriminator, no replay buffer) to `<stem>.{safetensors,json}`: a third of
+    /// the actor-critic's share of a checkpoint, what actors, `lhm record`, `lhm render-rollout`
+    /// and `--init-from` load with [`Self::load`], and what can be committed. Training resumes
+    /// from the full checkpoint, not from this (a learner loaded from it starts a fresh Adam).
     pub fn save_policy(&self, stem: &Path) -> LearnerResult<()> {
-        let tensors = self.policy_tensors()?;
+        let tensors = self.policy_tensors();
         let mut meta = self.meta();
         meta.config.amp = None;
         meta.amp = None;
+        meta.ppo_moments = false;
+        meta.ppo_adam_step = 0;
         checkpoint::save(stem, CHECKPOINT_KIND, &tensors, &meta)?;
         Ok(())
     }
@@ -231,13 +246,15 @@ impl Learner {
 
         let ac_vars = learner.actor_critic.named_vars();
         loaded.load_into(&ac_vars)?;
-        restore_adam(
-            &loaded,
-            "optim.ppo",
-            &ac_vars,
-            &mut learner.ppo.adam,
-            meta.ppo_adam_step,
-        )?;
+        if meta.ppo_moments {
+            restore_adam(
+                &loaded,
+                "optim.ppo",
+                &ac_vars,
+                &mut learner.ppo.adam,
+                meta.ppo_adam_step,
+            )?;
+        }
         learner.ppo.rng = meta.ppo_rng.clone();
         if let Some(lr) = meta.ppo_lr {
             learner.ppo.adam.config.lr = lr;

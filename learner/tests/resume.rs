@@ -44,6 +44,20 @@ fn config() -> LearnerConfig {
 
 /// One training iteration on synthetic data drawn from `iteration` (actions from the policy).
 fn train_step(learner: &mut Learner, iteration: u64) {
+    let mut rng = ppo_step(learner, iteration);
+    let agent: Vec<f32> = (0..ROWS * FEAT)
+        .map(|_| rng.uniform(-1.0, 1.0) as f32)
+        .collect();
+    let demo: Vec<f32> = (0..ROWS * FEAT)
+        .map(|_| rng.uniform(0.0, 2.0) as f32)
+        .collect();
+    learner.amp.as_mut().unwrap().update(&agent, &demo).unwrap();
+    learner.counters.iteration += 1;
+    learner.counters.samples += ROWS as u64;
+}
+
+/// The PPO half of [`train_step`]; returns the generator for the AMP half.
+fn ppo_step(learner: &mut Learner, iteration: u64) -> SplitMix64 {
     let mut rng = SplitMix64::new(1000 + iteration);
     let obs: Vec<f32> = (0..ROWS * OBS)
         .map(|_| rng.uniform(-2.0, 3.0) as f32)
@@ -68,15 +82,7 @@ fn train_step(learner: &mut Learner, iteration: u64) {
         .ppo
         .update(&mut learner.actor_critic, &batch)
         .unwrap();
-    let agent: Vec<f32> = (0..ROWS * FEAT)
-        .map(|_| rng.uniform(-1.0, 1.0) as f32)
-        .collect();
-    let demo: Vec<f32> = (0..ROWS * FEAT)
-        .map(|_| rng.uniform(0.0, 2.0) as f32)
-        .collect();
-    learner.amp.as_mut().unwrap().update(&agent, &demo).unwrap();
-    learner.counters.iteration += 1;
-    learner.counters.samples += ROWS as u64;
+    rng
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -218,6 +224,26 @@ fn the_policy_alone_loads_and_acts_as_the_full_learner_without_its_amp_state() {
     assert!(
         size("policy") < size("checkpoint"),
         "the replay buffer and disc stay out"
+    );
+    // The weights alone: no Adam moments (which would triple it) beyond the safetensors header.
+    let params: u64 = learner
+        .actor_critic
+        .named_vars()
+        .iter()
+        .map(|(_, v)| v.elem_count() as u64)
+        .sum();
+    assert!(
+        size("policy") < 4 * params + 16 * 1024,
+        "policy file {} bytes for {params} parameters",
+        size("policy")
+    );
+    // Training from it starts a fresh optimiser and still steps.
+    let mut from_policy = Learner::load(&dir.join("policy"), None).unwrap();
+    let before = from_policy.actor_critic.act_deterministic(&obs).unwrap();
+    ppo_step(&mut from_policy, 3);
+    assert_ne!(
+        from_policy.actor_critic.act_deterministic(&obs).unwrap(),
+        before
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
