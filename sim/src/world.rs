@@ -35,6 +35,64 @@ pub struct SimConfig {
     pub servo: ServoModel,
     /// rapier's PGS iterations inside each substep (`num_internal_pgs_iterations`).
     pub solver_iterations: usize,
+    /// A training aid, off by default: a torque on the root that holds it upright (see
+    /// [`UprightAssist`]).
+    pub assist: UprightAssist,
+}
+
+/// A "virtual assistant" (Yu, Turk and Liu 2018, "Learning Symmetric and Low-Energy
+/// Locomotion"; the "hand of god" of earlier curricula): an external PD torque on the root about
+/// the horizontal axes that pulls its up axis back toward the vertical, and an upward PD force
+/// that holds the root near a height (a hoist: it lifts, never pulls down), so a policy can
+/// explore steps without every stumble ending in a fall; a curriculum lowers both to zero. Yaw
+/// and horizontal travel are left free. All zero (the default) applies nothing.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct UprightAssist {
+    /// N·m per radian of tilt of the root's up axis from the vertical.
+    pub stiffness: f32,
+    /// N·m·s per rad/s of the root's horizontal angular velocity.
+    pub damping: f32,
+    /// N per metre the root is below `support_height`.
+    pub support_stiffness: f32,
+    /// N·s/m of the root's vertical velocity (the upward force is floored at zero).
+    pub support_damping: f32,
+    /// Root height the hoist holds, metres.
+    pub support_height: f32,
+}
+
+impl UprightAssist {
+    pub fn is_active(&self) -> bool {
+        self.stiffness != 0.0
+            || self.damping != 0.0
+            || self.support_stiffness != 0.0
+            || self.support_damping != 0.0
+    }
+
+    /// The hoist's force (world frame) on a root at `height` rising at `vz`.
+    pub fn support(&self, height: f32, vz: f32) -> Vector {
+        let up =
+            self.support_stiffness * (self.support_height - height) - self.support_damping * vz;
+        Vector::Z * up.max(0.0)
+    }
+
+    /// The torque (world frame) on a root at rotation `rot` turning at `angvel`.
+    pub fn torque(&self, rot: Rotation, angvel: Vector) -> Vector {
+        let up = rot * Vector::Z;
+        // The axis that turns `up` onto +z, scaled by the angle between them.
+        let axis = up.cross(Vector::Z);
+        let sin = axis.length();
+        let tilt = if sin > 1e-6 {
+            axis * (sin.atan2(up.dot(Vector::Z)) / sin)
+        } else if up.z < 0.0 {
+            // Upside down: any horizontal axis will do.
+            Vector::X * std::f32::consts::PI
+        } else {
+            Vector::ZERO
+        };
+        let horizontal_spin = angvel - Vector::Z * angvel.z;
+        tilt * self.stiffness - horizontal_spin * self.damping
+    }
 }
 
 impl Default for SimConfig {
@@ -55,6 +113,7 @@ impl Default for SimConfig {
             pin_root: false,
             servo: ServoModel::ImplicitSpring,
             solver_iterations: 1,
+            assist: UprightAssist::default(),
         }
     }
 }
@@ -225,6 +284,7 @@ impl World {
         for _ in 0..self.config.pipeline_steps_per_control.max(1) {
             self.character
                 .drive(targets, &mut self.state.multibody_joints);
+            self.apply_assist();
             let s = &mut self.state;
             self.pipeline.step(
                 self.gravity,
@@ -250,6 +310,23 @@ impl World {
         }
         self.control_steps += 1;
         true
+    }
+
+    /// Sets the root's external torque to the upright assist's for the coming pipeline step.
+    fn apply_assist(&mut self) {
+        if !self.config.assist.is_active() {
+            return;
+        }
+        let root = &mut self.state.bodies[self.character.root()];
+        let torque = self.config.assist.torque(*root.rotation(), root.angvel());
+        let force = self
+            .config
+            .assist
+            .support(root.translation().z, root.linvel().z);
+        root.reset_torques(false);
+        root.reset_forces(false);
+        root.add_torque(torque, true);
+        root.add_force(force, true);
     }
 
     /// Finite poses and velocities, no body faster than [`EXPLOSION_SPEED`], finite joints.
