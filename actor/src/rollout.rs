@@ -556,6 +556,13 @@ impl Rollout {
         version: u64,
     ) -> Result<StepOutput, RolloutError> {
         self.policy_version = version;
+        if self.spec.sim.assist.is_active() {
+            // The training aid's curriculum follows the policy version the actors act with.
+            let assist = self.spec.sim.assist.at_iteration(version);
+            for slot in &mut self.slots {
+                slot.env.world.config.assist = assist.clone();
+            }
+        }
         let obs: Vec<f32> = self.slots.iter().flat_map(|s| s.obs.clone()).collect();
         let act = self.act(&mut behaviour, &obs)?;
         let act_dim = self.spec.act_dim;

@@ -119,7 +119,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
     }
     let bench = a.scenes.load()?;
     let model = CharacterModel::amp_humanoid();
-    let train = crate::render_cmd::train_config_for(Some(&a.policy), a.config.as_deref())?;
+    let train = crate::render_cmd::without_training_aids(crate::render_cmd::train_config_for(
+        Some(&a.policy),
+        a.config.as_deref(),
+    )?);
     let learner = crate::render_cmd::load_policy(&a.policy, &train, &model)?;
     if a.no_language && learner.actor_critic.policy.encoder().is_none() {
         bail!(

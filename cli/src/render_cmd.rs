@@ -76,6 +76,10 @@ pub struct RenderRolloutArgs {
     /// ~/.cache/lhm/motions).
     #[arg(long)]
     motion_dir: Option<std::path::PathBuf>,
+    /// Keep the run's training aid (`sim.assist`, at full strength) instead of playing the
+    /// policy unassisted as evaluation does.
+    #[arg(long)]
+    assisted: bool,
 }
 
 /// Starts `env` from `spec` (`CLIP[@SECONDS]`) of the installed clips, turned toward the first
@@ -138,6 +142,11 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         trained.then(|| std::path::Path::new(a.policy.as_str())),
         a.config.as_deref(),
     )?;
+    let train = if a.assisted {
+        train
+    } else {
+        without_training_aids(train)
+    };
     let policy = match a.policy.as_str() {
         "zero" => Policy::Zero,
         "random" => Policy::Random,
@@ -311,6 +320,15 @@ pub(crate) fn train_config_for(
         }
         None => Ok(TrainConfig::default()),
     }
+}
+
+/// `train` without the upright assist: a trained policy is judged, and shown, on its own.
+pub(crate) fn without_training_aids(mut train: TrainConfig) -> TrainConfig {
+    if train.sim.assist.is_active() {
+        tracing::info!("the run trained with sim.assist; playing without it");
+        train.sim.assist = Default::default();
+    }
+    train
 }
 
 pub(crate) fn load_policy(

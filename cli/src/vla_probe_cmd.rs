@@ -40,7 +40,10 @@ pub fn run(a: VlaProbeArgs) -> Result<()> {
     }
     let bench = a.scenes.load()?;
     let model = CharacterModel::amp_humanoid();
-    let train = crate::render_cmd::train_config_for(Some(&a.policy), None)?;
+    let train = crate::render_cmd::without_training_aids(crate::render_cmd::train_config_for(
+        Some(&a.policy),
+        None,
+    )?);
     let vla = crate::render_cmd::load_policy(&a.policy, &train, &model)?;
     if vla.actor_critic.policy.encoder().is_none() {
         bail!(

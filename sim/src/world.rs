@@ -59,6 +59,11 @@ pub struct UprightAssist {
     pub support_damping: f32,
     /// Root height the hoist holds, metres.
     pub support_height: f32,
+    /// The curriculum, in training iterations (policy versions): full strength up to
+    /// `fade_from`, then linearly down to nothing at `fade_to`. `fade_to` 0: no fade (the
+    /// assist stays at full strength).
+    pub fade_from: u64,
+    pub fade_to: u64,
 }
 
 impl UprightAssist {
@@ -67,6 +72,30 @@ impl UprightAssist {
             || self.damping != 0.0
             || self.support_stiffness != 0.0
             || self.support_damping != 0.0
+    }
+
+    /// The assist's strength at training iteration `iteration` (see `fade_from`), in [0, 1].
+    pub fn strength_at(&self, iteration: u64) -> f32 {
+        if self.fade_to == 0 || iteration <= self.fade_from {
+            1.0
+        } else if iteration >= self.fade_to {
+            0.0
+        } else {
+            let span = (self.fade_to - self.fade_from) as f64;
+            (1.0 - (iteration - self.fade_from) as f64 / span) as f32
+        }
+    }
+
+    /// This assist with its gains scaled to its strength at training iteration `iteration`.
+    pub fn at_iteration(&self, iteration: u64) -> Self {
+        let k = self.strength_at(iteration);
+        Self {
+            stiffness: self.stiffness * k,
+            damping: self.damping * k,
+            support_stiffness: self.support_stiffness * k,
+            support_damping: self.support_damping * k,
+            ..self.clone()
+        }
     }
 
     /// The hoist's force (world frame) on a root at `height` rising at `vz`.

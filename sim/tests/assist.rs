@@ -82,6 +82,7 @@ fn the_assist_keeps_up_a_character_that_noisy_actions_topple() {
             support_stiffness: 5000.0,
             support_damping: 200.0,
             support_height: 0.85,
+            ..UprightAssist::default()
         },
         ..SimConfig::default()
     };
@@ -93,4 +94,30 @@ fn the_assist_keeps_up_a_character_that_noisy_actions_topple() {
     );
     assert_eq!(held, 300, "the assisted character fell at step {held}");
     assert!(tilt < 0.5, "assisted root tilted {tilt} rad");
+}
+
+#[test]
+fn the_assist_fades_linearly_over_its_iterations_and_stays_when_no_fade_is_set() {
+    let full = UprightAssist {
+        stiffness: 1000.0,
+        damping: 40.0,
+        support_stiffness: 5000.0,
+        support_damping: 200.0,
+        support_height: 0.85,
+        fade_from: 100,
+        fade_to: 300,
+    };
+    assert_eq!(full.at_iteration(0), full);
+    assert_eq!(full.at_iteration(100), full);
+    let half = full.at_iteration(200);
+    assert!((half.stiffness - 500.0).abs() < 1e-3 && (half.support_damping - 100.0).abs() < 1e-3);
+    assert_eq!(half.support_height, 0.85);
+    assert!(!full.at_iteration(300).is_active());
+    assert!(!full.at_iteration(10_000).is_active());
+    let constant = UprightAssist {
+        fade_from: 0,
+        fade_to: 0,
+        ..full.clone()
+    };
+    assert_eq!(constant.at_iteration(1_000_000), constant);
 }

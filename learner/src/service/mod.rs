@@ -973,7 +973,15 @@ pub fn run_learner(
         };
         if let Some(csv) = metrics_csv.as_mut() {
             let wall_s = run_started.elapsed().as_secs_f64();
-            if let Err(e) = append_metrics_row(csv, &report, &update, &book.counters, wall_s) {
+            let assist = &config.sim.assist;
+            let assist_strength = assist
+                .is_active()
+                .then(|| f64::from(assist.strength_at(report.iteration)));
+            let extra = Extra {
+                wall_s,
+                assist_strength,
+            };
+            if let Err(e) = append_metrics_row(csv, &report, &update, &book.counters, extra) {
                 tracing::warn!("writing {}: {e}; metrics.csv stops", csv.path().display());
                 metrics_csv = None;
             }
@@ -1109,14 +1117,25 @@ impl LearnerLinks {
     }
 }
 
+/// The row's figures that are neither the report's nor the update's.
+struct Extra {
+    wall_s: f64,
+    /// The upright assist's strength the actors train under (`None`: no assist).
+    assist_strength: Option<f64>,
+}
+
 /// One row of `metrics.csv` for an iteration.
 fn append_metrics_row(
     csv: &mut metrics_csv::MetricsCsv,
     report: &IterationReport,
     update: &optimise::Update,
     counters: &IntakeCounters,
-    wall_s: f64,
+    extra: Extra,
 ) -> std::io::Result<()> {
+    let Extra {
+        wall_s,
+        assist_strength,
+    } = extra;
     let s = &update.summary;
     let terms: Vec<(String, f64)> = s
         .reward_terms
@@ -1146,6 +1165,7 @@ fn append_metrics_row(
         ("accepted_chunks", counters.accepted as f64),
     ]);
     row.extend(terms.iter().map(|(k, v)| (k.as_str(), *v)));
+    row.push(("assist_strength", assist_strength.unwrap_or(f64::NAN)));
     csv.append(&row)
 }
 
