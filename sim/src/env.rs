@@ -102,7 +102,7 @@ impl Default for EnvConfig {
 
 impl RewardTerms {
     /// Each term times its weight, by name (their sum is the step's task reward).
-    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 12] {
+    pub fn weighted(&self, w: &RewardWeights) -> [(&'static str, f32); 13] {
         [
             ("locomotion", w.locomotion * self.locomotion),
             ("facing", w.facing * self.facing),
@@ -116,6 +116,7 @@ impl RewardTerms {
             ("alive", w.alive * self.alive),
             ("imitation", w.imitation * self.imitation),
             ("skill", w.skill * self.skill),
+            ("assist", w.assist * self.assist),
         ]
     }
 }
@@ -138,6 +139,8 @@ pub struct RewardTerms {
     pub alive: f32,
     /// 1 on the step the skill machine moves on from the acting skill to a later one.
     pub skill: f32,
+    /// The upright assist's effort over the step ([`rewards::assist_effort`], ≤ 0).
+    pub assist: f32,
 }
 
 #[derive(Clone, Debug)]
@@ -464,6 +467,7 @@ impl TaskEnv {
         self.prev_bodies.clone_from(&bodies);
         let mut terms = RewardTerms {
             power: self.power(&bodies, &targets),
+            assist: rewards::assist_effort(self.world.assist_torque, self.world.assist_force),
             imitation: self
                 .reference
                 .get(self.steps as usize - 1)

@@ -181,6 +181,12 @@ pub struct World {
     /// Set when the physics produced a non-finite or exploding state; the world is not stepped
     /// any more and its data must not be used (the NaN/explosion guard).
     pub physics_invalid: bool,
+    /// The upright assist's torque and force on the root, averaged over the last control step
+    /// (zero without an assist).
+    pub assist_torque: Vector,
+    pub assist_force: Vector,
+    /// Whether the root carries the assist's user torque and force from an earlier step.
+    assist_applied: bool,
 }
 
 /// Speed no body of a sane simulation reaches (m/s); beyond it the state counts as exploded.
@@ -192,6 +198,7 @@ pub struct Snapshot {
     state: PhysicsState,
     control_steps: u64,
     physics_invalid: bool,
+    assist_applied: bool,
 }
 
 impl World {
@@ -294,6 +301,9 @@ impl World {
             gravity: Vector::new(0.0, 0.0, -9.81),
             control_steps: 0,
             physics_invalid: false,
+            assist_torque: Vector::ZERO,
+            assist_force: Vector::ZERO,
+            assist_applied: false,
         }
     }
 
@@ -310,7 +320,10 @@ impl World {
         if self.physics_invalid {
             return false;
         }
-        for _ in 0..self.config.pipeline_steps_per_control.max(1) {
+        self.assist_torque = Vector::ZERO;
+        self.assist_force = Vector::ZERO;
+        let pipeline_steps = self.config.pipeline_steps_per_control.max(1);
+        for _ in 0..pipeline_steps {
             self.character
                 .drive(targets, &mut self.state.multibody_joints);
             self.apply_assist();
@@ -343,10 +356,18 @@ impl World {
 
     /// Sets the root's external torque to the upright assist's for the coming pipeline step.
     fn apply_assist(&mut self) {
+        let root = &mut self.state.bodies[self.character.root()];
         if !self.config.assist.is_active() {
+            // rapier keeps user forces until reset: an assist faded out must not leave its last
+            // push behind.
+            if self.assist_applied {
+                root.reset_torques(false);
+                root.reset_forces(false);
+                self.assist_applied = false;
+            }
             return;
         }
-        let root = &mut self.state.bodies[self.character.root()];
+        self.assist_applied = true;
         let torque = self.config.assist.torque(*root.rotation(), root.angvel());
         let force = self
             .config
@@ -356,6 +377,9 @@ impl World {
         root.reset_forces(false);
         root.add_torque(torque, true);
         root.add_force(force, true);
+        let share = 1.0 / self.config.pipeline_steps_per_control.max(1) as f32;
+        self.assist_torque += torque * share;
+        self.assist_force += force * share;
     }
 
     /// Finite poses and velocities, no body faster than [`EXPLOSION_SPEED`], finite joints.
@@ -424,6 +448,7 @@ impl World {
             state: self.state.clone(),
             control_steps: self.control_steps,
             physics_invalid: self.physics_invalid,
+            assist_applied: self.assist_applied,
         }
     }
 
@@ -431,6 +456,7 @@ impl World {
         self.state = s.state.clone();
         self.control_steps = s.control_steps;
         self.physics_invalid = s.physics_invalid;
+        self.assist_applied = s.assist_applied;
     }
 }
 

@@ -121,3 +121,41 @@ fn the_assist_fades_linearly_over_its_iterations_and_stays_when_no_fade_is_set()
     };
     assert_eq!(constant.at_iteration(1_000_000), constant);
 }
+
+#[test]
+fn the_world_reports_the_assist_effort_and_a_faded_assist_leaves_no_push_behind() {
+    let model = CharacterModel::amp_humanoid();
+    let hoist = UprightAssist {
+        stiffness: 1000.0,
+        damping: 40.0,
+        support_stiffness: 5000.0,
+        // Above the standing root height: the hoist pulls up on every step.
+        support_height: 1.2,
+        ..UprightAssist::default()
+    };
+    let mut w = World::new(
+        &model,
+        SimConfig {
+            assist: hoist,
+            ..SimConfig::default()
+        },
+    );
+    let zero = vec![0.0; model.dofs.len()];
+    for _ in 0..5 {
+        assert!(w.step(&zero));
+    }
+    assert!(w.assist_force.z > 500.0, "{:?}", w.assist_force);
+    let effort = lhm_sim::task::rewards::assist_effort(w.assist_torque, w.assist_force);
+    assert!(effort < -1.0, "{effort}");
+    // The fade reached zero: the root's user force is cleared, and the effort reads zero.
+    w.config.assist = UprightAssist::default();
+    assert!(w.step(&zero));
+    let root = &w.state.bodies[w.character.root()];
+    assert_eq!(root.user_force(), Vector::ZERO);
+    assert_eq!(root.user_torque(), Vector::ZERO);
+    assert_eq!(w.assist_force, Vector::ZERO);
+    assert_eq!(
+        lhm_sim::task::rewards::assist_effort(Vector::ZERO, Vector::ZERO),
+        0.0
+    );
+}

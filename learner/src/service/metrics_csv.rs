@@ -48,6 +48,7 @@ pub const COLUMNS: &[&str] = &[
     "dagger_rounds",
     // The Hierarchical RL baseline's skill completions (0 without the skill machine).
     "reward_skill",
+    "reward_assist",
     // The upright assist's strength (sim.assist; empty when the run has none).
     "assist_strength",
 ];

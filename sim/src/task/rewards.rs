@@ -91,6 +91,13 @@ pub fn place(object_pos: Vector, goal: Vector, k: f32) -> f32 {
     (-k * (object_pos - goal).length_squared()).exp()
 }
 
+/// Leaning on the upright assist (`sim::world::UprightAssist`), as a penalty: -(|τ| / 100 N·m +
+/// |F| / 500 N), the root torque and hoist force it applied (500 N is about the character's
+/// weight). Paying it teaches the policy to stand on its own while the assist still catches falls.
+pub fn assist_effort(torque: Vector, force: Vector) -> f32 {
+    -(torque.length() / 100.0 + force.length() / 500.0)
+}
+
 /// Mechanical power, as a penalty: -Σ |τ_i · q̇_i| (W).
 pub fn power_penalty(torques: &[f32], joint_velocities: &[f32]) -> f32 {
     -torques
@@ -215,6 +222,8 @@ pub struct RewardWeights {
     /// One-off reward on the step a Hierarchical-RL skill hands over to the next one (its
     /// completion); paid only under the skill machine (`EnvConfig::skills`).
     pub skill: f32,
+    /// Leaning on the upright assist ([`assist_effort`]); 0 (off) by default.
+    pub assist: f32,
 }
 
 impl Default for RewardWeights {
@@ -236,6 +245,7 @@ impl Default for RewardWeights {
             alive: 0.5,
             imitation: 0.0,
             skill: 5.0,
+            assist: 0.0,
         }
     }
 }
