@@ -1137,6 +1137,7 @@ fn append_metrics_row(
         assist_strength,
     } = extra;
     let s = &update.summary;
+    let finished = |v: f64| if s.episodes > 0 { v } else { f64::NAN };
     let terms: Vec<(String, f64)> = s
         .reward_terms
         .iter()
@@ -1149,8 +1150,10 @@ fn append_metrics_row(
         ("samples_per_s", report.samples_per_s),
         ("update_s", report.update_s),
         ("episodes", s.episodes as f64),
-        ("mean_return", s.mean_return),
-        ("mean_episode_length", s.mean_length),
+        // Empty, not 0, in an iteration that finished no episode (long episodes end in bursts,
+        // and zeros between the bursts would drag the plotted curve down).
+        ("mean_return", finished(s.mean_return)),
+        ("mean_episode_length", finished(s.mean_length)),
         ("success_rate", s.success_rate),
         ("fall_fraction", report.fall_fraction),
         ("task_start_fall_fraction", s.task_start_fall_fraction()),
