@@ -420,7 +420,7 @@ impl Rollout {
                 &self.model,
                 task,
                 &self.catalogue,
-                self.spec.sim.clone(),
+                self.sim_now(),
                 self.spec.env.clone(),
             );
             let (steps, end) = run_first_cycle(&mut env, teacher1)?;
@@ -435,6 +435,14 @@ impl Rollout {
         Err(RolloutError::Teacher1Fails(TEACHER1_TRIES))
     }
 
+    /// The run's simulation settings with the upright assist at the current policy version's
+    /// strength (new environments start under the same assist as the running ones).
+    fn sim_now(&self) -> lhm_sim::SimConfig {
+        let mut sim = self.spec.sim.clone();
+        sim.assist = sim.assist.at_iteration(self.policy_version);
+        sim
+    }
+
     /// An environment on a task drawn uniformly from the task set, started from a reference
     /// motion frame with the run's demo-start probability.
     fn fresh_start(&mut self) -> TaskEnv {
@@ -443,7 +451,7 @@ impl Rollout {
             &self.model,
             task,
             &self.catalogue,
-            self.spec.sim.clone(),
+            self.sim_now(),
             self.spec.env.clone(),
         );
         if let Some(demo) = &self.demo {
@@ -555,14 +563,14 @@ impl Rollout {
         mut behaviour: Behaviour<'_>,
         version: u64,
     ) -> Result<StepOutput, RolloutError> {
-        self.policy_version = version;
-        if self.spec.sim.assist.is_active() {
+        if version != self.policy_version && self.spec.sim.assist.is_active() {
             // The training aid's curriculum follows the policy version the actors act with.
             let assist = self.spec.sim.assist.at_iteration(version);
             for slot in &mut self.slots {
                 slot.env.world.config.assist = assist.clone();
             }
         }
+        self.policy_version = version;
         let obs: Vec<f32> = self.slots.iter().flat_map(|s| s.obs.clone()).collect();
         let act = self.act(&mut behaviour, &obs)?;
         let act_dim = self.spec.act_dim;

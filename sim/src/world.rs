@@ -185,8 +185,6 @@ pub struct World {
     /// (zero without an assist).
     pub assist_torque: Vector,
     pub assist_force: Vector,
-    /// Whether the root carries the assist's user torque and force from an earlier step.
-    assist_applied: bool,
 }
 
 /// Speed no body of a sane simulation reaches (m/s); beyond it the state counts as exploded.
@@ -198,7 +196,6 @@ pub struct Snapshot {
     state: PhysicsState,
     control_steps: u64,
     physics_invalid: bool,
-    assist_applied: bool,
 }
 
 impl World {
@@ -303,7 +300,6 @@ impl World {
             physics_invalid: false,
             assist_torque: Vector::ZERO,
             assist_force: Vector::ZERO,
-            assist_applied: false,
         }
     }
 
@@ -326,7 +322,7 @@ impl World {
         for _ in 0..pipeline_steps {
             self.character
                 .drive(targets, &mut self.state.multibody_joints);
-            self.apply_assist();
+            self.apply_assist(1.0 / pipeline_steps as f32);
             let s = &mut self.state;
             self.pipeline.step(
                 self.gravity,
@@ -354,20 +350,19 @@ impl World {
         true
     }
 
-    /// Sets the root's external torque to the upright assist's for the coming pipeline step.
-    fn apply_assist(&mut self) {
+    /// Sets the root's external torque and force to the upright assist's for the coming pipeline
+    /// step, and adds `share` of them to the control step's means.
+    fn apply_assist(&mut self, share: f32) {
         let root = &mut self.state.bodies[self.character.root()];
         if !self.config.assist.is_active() {
-            // rapier keeps user forces until reset: an assist faded out must not leave its last
-            // push behind.
-            if self.assist_applied {
+            // rapier keeps user forces until reset, and nothing but the assist sets them on the
+            // root: an assist faded out must not leave its last push behind.
+            if root.user_force() != Vector::ZERO || root.user_torque() != Vector::ZERO {
                 root.reset_torques(false);
                 root.reset_forces(false);
-                self.assist_applied = false;
             }
             return;
         }
-        self.assist_applied = true;
         let torque = self.config.assist.torque(*root.rotation(), root.angvel());
         let force = self
             .config
@@ -377,7 +372,6 @@ impl World {
         root.reset_forces(false);
         root.add_torque(torque, true);
         root.add_force(force, true);
-        let share = 1.0 / self.config.pipeline_steps_per_control.max(1) as f32;
         self.assist_torque += torque * share;
         self.assist_force += force * share;
     }
@@ -448,7 +442,6 @@ impl World {
             state: self.state.clone(),
             control_steps: self.control_steps,
             physics_invalid: self.physics_invalid,
-            assist_applied: self.assist_applied,
         }
     }
 
@@ -456,7 +449,6 @@ impl World {
         self.state = s.state.clone();
         self.control_steps = s.control_steps;
         self.physics_invalid = s.physics_invalid;
-        self.assist_applied = s.assist_applied;
     }
 }
 
