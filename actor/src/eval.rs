@@ -95,11 +95,22 @@ pub struct EvalSetup<'a> {
     /// A VLA policy hears each cycle's instruction; `false` blanks it (the no-language
     /// ablation). State-based policies ignore it.
     pub language: bool,
+    /// With `[env.gait]`: the clips and the gait cycle every episode starts in (step 0, turned
+    /// toward the first object), as the run's actors start theirs. `None` without a gait.
+    pub gait: Option<GaitStart<'a>>,
+}
+
+/// What an episode in `[env.gait]` starts from.
+#[derive(Clone)]
+pub struct GaitStart<'a> {
+    pub demo: &'a lhm_sim::motion::demo::DemoMotion,
+    pub reference: std::sync::Arc<lhm_sim::gait::GaitReference>,
 }
 
 impl EvalSetup<'_> {
     /// The environment of the `(task, seed)` episode, exactly as [`evaluate`] runs it: the
-    /// seeded start, no demo start, and a time limit of every pair's cycle limit.
+    /// seeded start, no demo start (in the gait with `[env.gait]`), and a time limit of every
+    /// pair's cycle limit.
     pub fn env_for(&self, task: &Task, seed: u64) -> TaskEnv {
         let task = seeded_task(task, seed);
         let pairs = task.sequence.len() as u32;
@@ -108,7 +119,12 @@ impl EvalSetup<'_> {
             demo_start_probability: 0.0,
             ..self.env.clone()
         };
-        TaskEnv::new(self.model, &task, self.catalogue, self.sim.clone(), config)
+        let mut env = TaskEnv::new(self.model, &task, self.catalogue, self.sim.clone(), config);
+        if let Some(g) = &self.gait {
+            let yaw = env.yaw_toward_first_object();
+            env.start_in_gait(g.demo, std::sync::Arc::clone(&g.reference), 0, yaw);
+        }
+        env
     }
 }
 
@@ -506,6 +522,7 @@ mod tests {
                 env: &env,
                 batch: 3,
                 language: true,
+                gait: None,
             };
             evaluate(&ac, &setup, &jobs, &|n| {
                 seen.store(n, std::sync::atomic::Ordering::Relaxed)
@@ -556,6 +573,7 @@ mod tests {
             env: &env,
             batch: 2,
             language: true,
+            gait: None,
         };
         let run = |p: EvalPolicy, jobs: &[(Task, u64)]| evaluate(p, &setup, jobs, &|_| {}).unwrap();
         let teachers = EvalPolicy::Teachers {

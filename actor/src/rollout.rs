@@ -31,10 +31,12 @@ use lhm_nets::{ActorCritic, SplitMix64};
 use lhm_protos::{EpisodeStats, Role, Stage, TrajectoryChunk, WireMessage};
 use lhm_scenes::{Benchmark, Catalogue, Task};
 use lhm_sim::env::TaskEnv;
+use lhm_sim::gait::GaitReference;
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::task::cycles::Handoff;
 use lhm_sim::vla::{VlaLayout, VlaView, Vocabulary};
 use lhm_sim::CharacterModel;
+use std::sync::Arc;
 
 use lhm_cluster::RunSpec;
 use lhm_protos::EpisodeFrames;
@@ -222,6 +224,8 @@ pub struct Rollout {
     policy_version: u64,
     /// Reference motion for demo starts (loaded when the run spec asks for them).
     demo: Option<DemoMotion>,
+    /// With `[env.gait]`: the gait's cycle every episode starts in.
+    gait: Option<Arc<GaitReference>>,
     /// Teacher 2's rollouts: the frozen Teacher 1 that plays each episode's first pair.
     teacher1: Option<ActorCritic>,
     /// Control steps Teacher 1 took (simulation cost of Teacher 2's starts).
@@ -330,18 +334,30 @@ impl Rollout {
         if spec.chunk_steps == 0 {
             return Err(RolloutError::Spec("chunk_steps must be > 0".into()));
         }
-        let demo = if spec.env.demo_start_probability > 0.0 {
+        let demo = if spec.env.demo_start_probability > 0.0 || spec.env.gait.is_some() {
             let dir = lhm_sim::motion::default_dir();
             let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&spec.env, &spec.sim))
                 .map_err(|e| {
                     RolloutError::Spec(format!(
-                        "the run starts {:.0}% of episodes from reference motion: {e}",
-                        100.0 * spec.env.demo_start_probability
+                        "the run starts {:.0}% of episodes from reference motion{}: {e}",
+                        100.0 * spec.env.demo_start_probability,
+                        if spec.env.gait.is_some() {
+                            " and runs [env.gait]"
+                        } else {
+                            ""
+                        }
                     ))
                 })?;
             Some(demo)
         } else {
             None
+        };
+        let gait = match (&spec.env.gait, &demo) {
+            (Some(config), Some(demo)) => Some(Arc::new(
+                lhm_sim::gait::reference_for(&model, demo, &config.clip, 1.0 / spec.sim.control_hz)
+                    .map_err(RolloutError::Spec)?,
+            )),
+            _ => None,
         };
         let mut rollout = Self {
             model,
@@ -358,6 +374,7 @@ impl Rollout {
             capture: None,
             policy_version: 0,
             demo,
+            gait,
             spec,
             teacher1,
             teacher1_steps: 0,
@@ -454,7 +471,14 @@ impl Rollout {
             self.sim_now(),
             self.spec.env.clone(),
         );
-        if let Some(demo) = &self.demo {
+        if let (Some(demo), Some(gait)) = (&self.demo, &self.gait) {
+            // In the gait: a random step of its cycle, turned toward the first object.
+            let rng = &mut self.rng;
+            let step = rng.below(gait.len());
+            let noise = (2.0 * rng.next_f64() as f32 - 1.0) * self.spec.env.demo_start_yaw_noise;
+            let yaw = env.yaw_toward_first_object() + noise;
+            env.start_in_gait(demo, Arc::clone(gait), step, yaw);
+        } else if let Some(demo) = &self.demo {
             let rng = &mut self.rng;
             if (rng.next_f64() as f32) < self.spec.env.demo_start_probability {
                 if let Some((clip, t)) = demo.sample_start(&mut || rng.next_f64()) {

@@ -169,6 +169,33 @@ pub fn run(a: EvalArgs) -> Result<()> {
         )
     };
     let started = std::time::Instant::now();
+    // A run with [env.gait] is played in its gait, as its actors played it.
+    let gait_clips = match &train.env.gait {
+        Some(_) => {
+            let dir = lhm_sim::motion::default_dir();
+            Some(
+                lhm_sim::motion::DemoMotion::load_dir(
+                    &model,
+                    &dir,
+                    lhm_sim::motion::AmpWindow::of(&train.env, &train.sim),
+                )
+                .with_context(|| {
+                    format!("[env.gait] needs the motion clips in {}", dir.display())
+                })?,
+            )
+        }
+        None => None,
+    };
+    let gait = match (&train.env.gait, &gait_clips) {
+        (Some(g), Some(demo)) => Some(lhm_actor::eval::GaitStart {
+            demo,
+            reference: std::sync::Arc::new(
+                lhm_sim::gait::reference_for(&model, demo, &g.clip, 1.0 / train.sim.control_hz)
+                    .map_err(anyhow::Error::msg)?,
+            ),
+        }),
+        _ => None,
+    };
     let setup = EvalSetup {
         model: &model,
         catalogue: &bench.catalogue,
@@ -176,6 +203,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         env: &train.env,
         batch: a.batch,
         language: !a.no_language,
+        gait,
     };
     let episodes = evaluate(policy, &setup, &jobs, &|done| {
         bar.set_position(done as u64);

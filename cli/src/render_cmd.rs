@@ -165,6 +165,23 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
     );
     if let Some(spec) = &a.demo_start {
         demo_start(&mut env, spec, a.motion_dir.clone(), &train)?;
+    } else if let Some(gait) = &train.env.gait {
+        // A run with [env.gait] plays in the gait, as its actors start every episode.
+        let dir = a
+            .motion_dir
+            .clone()
+            .unwrap_or_else(lhm_sim::motion::default_dir);
+        let demo = lhm_sim::motion::DemoMotion::load_dir(
+            &model,
+            &dir,
+            lhm_sim::motion::AmpWindow::of(&train.env, &train.sim),
+        )
+        .with_context(|| format!("[env.gait] needs the motion clips in {}", dir.display()))?;
+        let reference =
+            lhm_sim::gait::reference_for(&model, &demo, &gait.clip, 1.0 / train.sim.control_hz)
+                .map_err(anyhow::Error::msg)?;
+        let yaw = env.yaw_toward_first_object();
+        env.start_in_gait(&demo, std::sync::Arc::new(reference), 0, yaw);
     }
     let mut rng = SplitMix64::new(a.seed);
     let mut net_rng = lhm_nets::SplitMix64::new(a.seed);

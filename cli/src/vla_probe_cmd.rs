@@ -76,6 +76,7 @@ pub fn run(a: VlaProbeArgs) -> Result<()> {
         env: &train.env,
         batch: 1,
         language: true,
+        gait: None,
     };
     let mut rows = Vec::new();
     for split in &a.splits {

@@ -2,6 +2,7 @@
 //! task — observations, reward terms, terminations, cycle switching and the AMP history — wired
 //! together. Each piece stays a small pure function in `obs` and `task`.
 
+use crate::gait::{base_targets, steer, BalanceGains, GaitReference, Rig};
 use crate::mjcf::{CharacterModel, JointKind};
 use crate::motion::demo::DemoMotion;
 use crate::motion::retarget::KinematicPose;
@@ -70,6 +71,47 @@ pub struct EnvConfig {
     /// skill's part of the episode ends (terminal for the return, the world goes on) when the
     /// machine moves on from it. `None`: the paper's task reward, no skill input.
     pub skills: Option<SkillConfig>,
+    /// A reference gait with balance feedback as the base of the action (`[env.gait]`, off by
+    /// default; [`crate::gait`]): every episode starts in the gait, and the policy's action is a
+    /// residual on the base's PD targets. The policy reads the gait's phase (sin, cos) after the
+    /// obstacle map (and the skill, if any).
+    pub gait: Option<GaitConfig>,
+}
+
+/// `[env.gait]`: the residual base.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GaitConfig {
+    /// The looped clip the gait follows: the first installed clip whose name contains this.
+    pub clip: String,
+    /// PD target = base + `residual` · action scale · action, per DoF (DReCon's residual).
+    pub residual: f32,
+    /// Hip yaw (radians) per radian of heading error toward the current object, at most
+    /// `steer_max` either way.
+    pub steer_gain: f32,
+    pub steer_max: f32,
+    pub gains: BalanceGains,
+}
+
+impl Default for GaitConfig {
+    fn default() -> Self {
+        Self {
+            clip: "humanoid3d_walk".into(),
+            residual: 0.2,
+            // Steering destabilises the base: at 0.5 rad/rad it fell within ~1 s turning toward
+            // a goal 30-60° off; at 0.1 it survives as long as walking straight (gait_probe).
+            steer_gain: 0.1,
+            steer_max: 0.2,
+            gains: BalanceGains::default(),
+        }
+    }
+}
+
+/// The gait an episode runs: its cycle and where in it the next step is.
+#[derive(Clone, Debug)]
+struct GaitRun {
+    reference: Arc<GaitReference>,
+    step: usize,
 }
 
 impl Default for EnvConfig {
@@ -96,6 +138,7 @@ impl Default for EnvConfig {
             lift_height: 0.3,
             imitation_seconds: 3.0,
             skills: None,
+            gait: None,
         }
     }
 }
@@ -188,6 +231,10 @@ pub struct TaskEnv {
     reference: Arc<Vec<Vec<BodyState>>>,
     /// Feet and hands, for the imitation term.
     end_effectors: Vec<usize>,
+    /// With `[env.gait]`: the legs the gait's feedback drives (`None` for a character without
+    /// them: no gait), and the gait this episode runs (after [`Self::start_gait`]).
+    rig: Option<Rig>,
+    gait: Option<GaitRun>,
 }
 
 /// Snapshot of a whole environment: world, cycle state, AMP history, counters.
@@ -201,6 +248,7 @@ pub struct EnvSnapshot {
     reached: bool,
     demo_start: bool,
     reference: Arc<Vec<Vec<BodyState>>>,
+    gait: Option<GaitRun>,
 }
 
 impl TaskEnv {
@@ -217,6 +265,7 @@ impl TaskEnv {
             model.body_index("left_hand").unwrap_or(0),
             model.body_index("right_hand").unwrap_or(0),
         ];
+        let rig = config.gait.as_ref().and_then(|_| Rig::new(model));
         let mut amp = AmpHistory::new(config.amp_frames, amp_frame_dim(model));
         let prev_bodies = world.body_states();
         amp.push(amp_frame(model, &prev_bodies));
@@ -244,6 +293,8 @@ impl TaskEnv {
                 .iter()
                 .filter_map(|name| model.body_index(name))
                 .collect(),
+            rig,
+            gait: None,
         }
     }
 
@@ -317,6 +368,41 @@ impl TaskEnv {
         }
     }
 
+    /// Runs the gait from step `step` of `reference`'s cycle: from now on actions are residuals
+    /// on its base (a start from the same clip time, [`Self::start_from_demo_heading`], puts the
+    /// character where the gait is). `false`, and nothing changes, without `[env.gait]` or for a
+    /// character the gait cannot drive.
+    pub fn start_gait(&mut self, reference: Arc<GaitReference>, step: usize) -> bool {
+        if self.config.gait.is_none() || self.rig.is_none() || reference.is_empty() {
+            return false;
+        }
+        self.gait = Some(GaitRun { reference, step });
+        true
+    }
+
+    /// A start in the gait: the character as the gait's clip is at cycle step `step`, placed at
+    /// the task's start and turned to `yaw`, and the gait running from there
+    /// ([`Self::start_from_demo_heading`] + [`Self::start_gait`]). `reference` must be a cycle
+    /// of `demo`'s clips ([`crate::gait::reference_for`]).
+    pub fn start_in_gait(
+        &mut self,
+        demo: &DemoMotion,
+        reference: Arc<GaitReference>,
+        step: usize,
+        yaw: f32,
+    ) -> bool {
+        if self.config.gait.is_none() || self.rig.is_none() {
+            return false;
+        }
+        self.start_from_demo_heading(demo, reference.clip, reference.time(step), yaw);
+        self.start_gait(reference, step)
+    }
+
+    /// The gait's phase in its cycle, [0, 1), while one runs.
+    pub fn gait_phase(&self) -> Option<f32> {
+        self.gait.as_ref().map(|g| g.reference.phase(g.step))
+    }
+
     pub fn obs_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
         proprioception_dim(model)
             + TASK_OBS_DIM
@@ -326,6 +412,7 @@ impl TaskEnv {
             } else {
                 0
             }
+            + if config.gait.is_some() { 2 } else { 0 }
     }
 
     pub fn amp_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
@@ -389,6 +476,13 @@ impl TaskEnv {
             let skill = self.skill_at(&bodies).unwrap_or(Skill::Walk);
             obs.extend(skills::one_hot(skill));
         }
+        if self.config.gait.is_some() {
+            // Zeros when no gait runs (a start outside the gait).
+            let (sin, cos) = self
+                .gait_phase()
+                .map_or((0.0, 0.0), |p| (std::f32::consts::TAU * p).sin_cos());
+            obs.extend([sin, cos]);
+        }
         obs
     }
 
@@ -442,9 +536,59 @@ impl TaskEnv {
         self.amp.features()
     }
 
+    /// PD targets for an action while a gait runs: the gait's base, turned toward the current
+    /// object, plus the action as a residual (within each joint's range); the gait moves on a
+    /// step. `None` when no gait runs.
+    fn gait_targets(&mut self, action: &[f32]) -> Option<Vec<f32>> {
+        let (run, rig, config) = (
+            self.gait.as_mut()?,
+            self.rig.as_ref()?,
+            self.config.gait.as_ref()?,
+        );
+        let now = self.world.body_states();
+        let (reference_now, angles) = run.reference.at(run.step);
+        let mut targets = base_targets(rig, &config.gains, &now, reference_now, angles);
+        let last = self.task.sequence.len().saturating_sub(1);
+        let object = self
+            .task
+            .sequence
+            .get(self.cycles.current.min(last))
+            .and_then(|step| self.task.object_index(&step.object))
+            .and_then(|i| self.world.object_pose(i));
+        if let (Some(object), Some(root)) = (object, now.first()) {
+            let facing = root.rot * Vector::X;
+            let to = object.translation - root.pos;
+            let error = (to.y.atan2(to.x) - facing.y.atan2(facing.x) + std::f32::consts::PI)
+                .rem_euclid(std::f32::consts::TAU)
+                - std::f32::consts::PI;
+            steer(
+                rig,
+                &mut targets,
+                reference_now,
+                config.steer_gain * error,
+                config.steer_max,
+            );
+        }
+        let character = &self.world.character;
+        for (i, (t, d)) in targets.iter_mut().zip(&self.model.dofs).enumerate() {
+            let a = action
+                .get(i)
+                .copied()
+                .filter(|a| a.is_finite())
+                .unwrap_or(0.0);
+            *t = (*t + config.residual * character.action_scale[i] * a)
+                .clamp(d.range[0] as f32, d.range[1] as f32);
+        }
+        run.step += 1;
+        Some(targets)
+    }
+
     pub fn step(&mut self, action: &[f32]) -> StepResult {
         let acting = self.current_skill();
-        let targets = self.world.character.targets(action);
+        let targets = match self.gait_targets(action) {
+            Some(targets) => targets,
+            None => self.world.character.targets(action),
+        };
         let ok = self.world.step_targets(&targets);
         self.steps += 1;
         if !ok {
@@ -621,6 +765,7 @@ impl TaskEnv {
             reached: self.reached,
             demo_start: self.demo_start,
             reference: Arc::clone(&self.reference),
+            gait: self.gait.clone(),
         }
     }
 
@@ -633,5 +778,6 @@ impl TaskEnv {
         self.reached = s.reached;
         self.demo_start = s.demo_start;
         self.reference = Arc::clone(&s.reference);
+        self.gait = s.gait.clone();
     }
 }

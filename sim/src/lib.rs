@@ -6,6 +6,7 @@ pub mod bench;
 pub mod character;
 pub mod env;
 pub mod fidelity;
+pub mod gait;
 pub mod mjcf;
 pub mod motion;
 pub mod obs;

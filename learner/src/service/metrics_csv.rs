@@ -51,6 +51,9 @@ pub const COLUMNS: &[&str] = &[
     "reward_assist",
     // The upright assist's strength (sim.assist; empty when the run has none).
     "assist_strength",
+    // Reach over every finished episode, demo and gait starts included (`reach_rate` counts task
+    // starts only; with [env.gait] every episode starts in the gait).
+    "reach_rate_all",
 ];
 
 pub struct MetricsCsv {

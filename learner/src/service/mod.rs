@@ -1158,6 +1158,7 @@ fn append_metrics_row(
         ("fall_fraction", report.fall_fraction),
         ("task_start_fall_fraction", s.task_start_fall_fraction()),
         ("reach_rate", report.reach_rate),
+        ("reach_rate_all", s.reached as f64 / s.episodes as f64),
         ("disc_accuracy", report.disc_accuracy.unwrap_or(f64::NAN)),
         ("style_reward", s.mean_style_reward),
         ("task_reward", s.mean_task_reward),

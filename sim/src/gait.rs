@@ -1,0 +1,359 @@
+//! A reference gait with balance feedback: the base a residual policy acts on (`[env.gait]`).
+//!
+//! Open-loop tracking of a looped walk (the clip's joint angles as PD targets) falls within ~1 s
+//! (RESULTS.md, fourth session), and eleven sessions of PPO + AMP from a standing character never
+//! found a step. Character-animation controllers keep such a reference up with a few feedback
+//! terms on top of it — SIMBICON (Yin, Loken, van de Panne 2007), data-driven biped control (Lee,
+//! Kim, Lee 2010): the swing hip places the foot by the centre of mass's position and velocity
+//! error, the stance hip holds the pelvis's tilt, the stance ankle brakes. DReCon (Bergamin et
+//! al. 2019) lets a policy learn a residual on a kinematic reference instead of the whole action.
+//! This module is that base: [`BalanceGains`] (found by an evolution strategy on the simulator,
+//! `cargo run --release -p lhm-sim --example gait_probe`), the reference cycle sampled at the
+//! control rate ([`GaitReference`]), and [`base_targets`], a pure function of the character's and
+//! the reference's body states.
+
+use crate::fidelity::joint_angles;
+use crate::mjcf::CharacterModel;
+use crate::motion::demo::DemoMotion;
+use crate::obs::BodyState;
+use rapier3d::math::{Rotation, Vector};
+use serde::{Deserialize, Serialize};
+
+/// Feedback gains on top of the reference's joint angles (radians per unit of error: m, m/s,
+/// rad, rad/s). "Swing" and "stance" are the reference's: its lower foot is the stance foot.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BalanceGains {
+    /// Swing hip pitch from the centre of mass's forward offset over the stance foot and its
+    /// forward velocity, both against the reference's.
+    pub swing_d_fwd: f32,
+    pub swing_v_fwd: f32,
+    /// Swing hip roll from the lateral offset and velocity.
+    pub swing_d_lat: f32,
+    pub swing_v_lat: f32,
+    /// Stance hip pitch and roll from the pelvis's tilt error and tilt rate error.
+    pub stance_pitch: f32,
+    pub stance_roll: f32,
+    pub stance_pitch_rate: f32,
+    pub stance_roll_rate: f32,
+    /// Stance ankle pitch from the forward velocity error and the pelvis pitch error; stance
+    /// ankle roll from the lateral velocity error.
+    pub ankle_v_fwd: f32,
+    pub ankle_pitch: f32,
+    pub ankle_v_lat: f32,
+    /// Swing hip pitch and roll from the pelvis's tilt error (the swing thigh held in the world).
+    pub swing_tilt: f32,
+    /// Abdomen pitch and roll from the torso's tilt error.
+    pub abdomen_pitch: f32,
+    pub abdomen_roll: f32,
+    /// Constant offsets: swing knee, stance knee, swing hip pitch (clearance and sag).
+    pub swing_knee_bias: f32,
+    pub stance_knee_bias: f32,
+    pub swing_hip_bias: f32,
+}
+
+impl Default for BalanceGains {
+    /// The gait probe's best gains on the 8-phase objective (RESULTS.md, twelfth session).
+    fn default() -> Self {
+        Self {
+            swing_d_fwd: -0.189,
+            swing_v_fwd: -0.179,
+            swing_d_lat: -0.0731,
+            swing_v_lat: 0.275,
+            stance_pitch: 4.11,
+            stance_roll: 0.0793,
+            stance_pitch_rate: 0.246,
+            stance_roll_rate: 0.408,
+            ankle_v_fwd: -0.273,
+            ankle_pitch: 0.167,
+            ankle_v_lat: -0.138,
+            swing_tilt: 0.343,
+            abdomen_pitch: 0.178,
+            abdomen_roll: 0.133,
+            swing_knee_bias: -0.3,
+            stance_knee_bias: -0.332,
+            swing_hip_bias: -0.296,
+        }
+    }
+}
+
+impl BalanceGains {
+    /// Number of gains, in the order of [`Self::to_array`].
+    pub const LEN: usize = 17;
+
+    pub fn to_array(&self) -> [f32; Self::LEN] {
+        [
+            self.swing_d_fwd,
+            self.swing_v_fwd,
+            self.swing_d_lat,
+            self.swing_v_lat,
+            self.stance_pitch,
+            self.stance_roll,
+            self.stance_pitch_rate,
+            self.stance_roll_rate,
+            self.ankle_v_fwd,
+            self.ankle_pitch,
+            self.ankle_v_lat,
+            self.swing_tilt,
+            self.abdomen_pitch,
+            self.abdomen_roll,
+            self.swing_knee_bias,
+            self.stance_knee_bias,
+            self.swing_hip_bias,
+        ]
+    }
+
+    pub fn from_array(a: [f32; Self::LEN]) -> Self {
+        Self {
+            swing_d_fwd: a[0],
+            swing_v_fwd: a[1],
+            swing_d_lat: a[2],
+            swing_v_lat: a[3],
+            stance_pitch: a[4],
+            stance_roll: a[5],
+            stance_pitch_rate: a[6],
+            stance_roll_rate: a[7],
+            ankle_v_fwd: a[8],
+            ankle_pitch: a[9],
+            ankle_v_lat: a[10],
+            swing_tilt: a[11],
+            abdomen_pitch: a[12],
+            abdomen_roll: a[13],
+            swing_knee_bias: a[14],
+            stance_knee_bias: a[15],
+            swing_hip_bias: a[16],
+        }
+    }
+
+    /// The names of [`Self::to_array`]'s entries.
+    pub const NAMES: [&'static str; Self::LEN] = [
+        "swing_d_fwd",
+        "swing_v_fwd",
+        "swing_d_lat",
+        "swing_v_lat",
+        "stance_pitch",
+        "stance_roll",
+        "stance_pitch_rate",
+        "stance_roll_rate",
+        "ankle_v_fwd",
+        "ankle_pitch",
+        "ankle_v_lat",
+        "swing_tilt",
+        "abdomen_pitch",
+        "abdomen_roll",
+        "swing_knee_bias",
+        "stance_knee_bias",
+        "swing_hip_bias",
+    ];
+}
+
+/// DoF and body indices the feedback acts on, legs as [right, left].
+#[derive(Clone, Debug)]
+pub struct Rig {
+    hip_x: [usize; 2],
+    hip_y: [usize; 2],
+    hip_z: [usize; 2],
+    knee: [usize; 2],
+    ankle_x: [usize; 2],
+    ankle_y: [usize; 2],
+    abdomen_x: usize,
+    abdomen_y: usize,
+    foot: [usize; 2],
+    torso: usize,
+    masses: Vec<f32>,
+}
+
+impl Rig {
+    /// `None` when the model lacks one of the AMP humanoid's legs, feet, abdomen or torso.
+    pub fn new(model: &CharacterModel) -> Option<Self> {
+        let dof = |n: &str| model.dofs.iter().position(|d| d.name == n);
+        let body = |n: &str| model.body_index(n);
+        Some(Self {
+            hip_x: [dof("right_hip_x")?, dof("left_hip_x")?],
+            hip_y: [dof("right_hip_y")?, dof("left_hip_y")?],
+            hip_z: [dof("right_hip_z")?, dof("left_hip_z")?],
+            knee: [dof("right_knee")?, dof("left_knee")?],
+            ankle_x: [dof("right_ankle_x")?, dof("left_ankle_x")?],
+            ankle_y: [dof("right_ankle_y")?, dof("left_ankle_y")?],
+            abdomen_x: dof("abdomen_x")?,
+            abdomen_y: dof("abdomen_y")?,
+            foot: [body("right_foot")?, body("left_foot")?],
+            torso: body("torso")?,
+            masses: model
+                .bodies
+                .iter()
+                .map(|b| b.geoms.iter().map(|g| g.mass() as f32).sum())
+                .collect(),
+        })
+    }
+
+    /// The stance foot of a frame (0 right, 1 left): the lower one.
+    pub fn stance(&self, frame: &[BodyState]) -> usize {
+        usize::from(frame[self.foot[1]].pos.z < frame[self.foot[0]].pos.z)
+    }
+}
+
+/// What the feedback compares between the character and its reference, each in its own heading
+/// frame (x forward, y left).
+#[derive(Clone, Copy, Debug)]
+pub struct Balance {
+    /// Centre of mass relative to the stance foot, horizontal.
+    pub d: Vector,
+    /// Centre-of-mass velocity.
+    pub v: Vector,
+    /// Pelvis and torso rotations, and the pelvis's angular velocity.
+    pub pelvis: Rotation,
+    pub torso: Rotation,
+    pub rate: Vector,
+}
+
+fn heading(rot: Rotation) -> Rotation {
+    let f = rot * Vector::X;
+    Rotation::from_rotation_z(f.y.atan2(f.x))
+}
+
+/// The rotation vector of `a · b⁻¹`, the short way round.
+fn rotation_error(a: Rotation, b: Rotation) -> Vector {
+    let q = (a * b.inverse()).normalize();
+    if q.w < 0.0 { -q } else { q }.to_scaled_axis()
+}
+
+pub fn balance(rig: &Rig, states: &[BodyState], stance: usize) -> Balance {
+    let total: f32 = rig.masses.iter().sum::<f32>().max(f32::EPSILON);
+    let (mut p, mut v) = (Vector::ZERO, Vector::ZERO);
+    for (s, m) in states.iter().zip(&rig.masses) {
+        p += s.pos * *m;
+        v += s.linvel * *m;
+    }
+    let (p, v) = (p / total, v / total);
+    let h = heading(states[0].rot).inverse();
+    let mut d = h * (p - states[rig.foot[stance]].pos);
+    d.z = 0.0;
+    Balance {
+        d,
+        v: h * v,
+        pelvis: h * states[0].rot,
+        torso: h * states[rig.torso].rot,
+        rate: h * states[0].angvel,
+    }
+}
+
+/// PD targets (radians, one per DoF): the reference's next joint angles `reference_next` with the
+/// feedback of `gains` for the character in `now` against the reference in `reference_now`.
+pub fn base_targets(
+    rig: &Rig,
+    gains: &BalanceGains,
+    now: &[BodyState],
+    reference_now: &[BodyState],
+    reference_next: &[f32],
+) -> Vec<f32> {
+    let g = gains;
+    let mut t = reference_next.to_vec();
+    let stance = rig.stance(reference_now);
+    let swing = 1 - stance;
+    let c = balance(rig, now, stance);
+    let r = balance(rig, reference_now, stance);
+    let dd = c.d - r.d;
+    let dv = c.v - r.v;
+    let e = rotation_error(c.pelvis, r.pelvis);
+    let et = rotation_error(c.torso, r.torso);
+    let w = c.rate - r.rate;
+    t[rig.hip_y[swing]] +=
+        g.swing_d_fwd * dd.x + g.swing_v_fwd * dv.x + g.swing_tilt * e.y + g.swing_hip_bias;
+    t[rig.hip_x[swing]] += g.swing_d_lat * dd.y + g.swing_v_lat * dv.y + g.swing_tilt * e.x;
+    t[rig.hip_y[stance]] += g.stance_pitch * e.y + g.stance_pitch_rate * w.y;
+    t[rig.hip_x[stance]] += g.stance_roll * e.x + g.stance_roll_rate * w.x;
+    t[rig.ankle_y[stance]] += g.ankle_v_fwd * dv.x + g.ankle_pitch * e.y;
+    t[rig.ankle_x[stance]] += g.ankle_v_lat * dv.y;
+    t[rig.knee[swing]] += g.swing_knee_bias;
+    t[rig.knee[stance]] += g.stance_knee_bias;
+    t[rig.abdomen_y] += g.abdomen_pitch * et.y;
+    t[rig.abdomen_x] += g.abdomen_roll * et.x;
+    t
+}
+
+/// Turns the gait by `yaw` (radians, + left), spread over the hips' yaw: the swing hip turns the
+/// leg it is about to land by `yaw`, the stance hip turns the pelvis over the planted foot.
+/// Clamped to ±`max`.
+pub fn steer(rig: &Rig, targets: &mut [f32], reference_now: &[BodyState], yaw: f32, max: f32) {
+    let yaw = yaw.clamp(-max, max);
+    let stance = rig.stance(reference_now);
+    targets[rig.hip_z[1 - stance]] += yaw;
+    targets[rig.hip_z[stance]] -= yaw;
+}
+
+/// One cycle of a looped clip sampled at the control rate: per control step, every body's state
+/// (in the clip's own frame) and the joint angles the step after it.
+#[derive(Clone, Debug)]
+pub struct GaitReference {
+    pub clip: usize,
+    /// The clip time of step 0 and the control step (s).
+    pub dt: f32,
+    frames: Vec<Vec<BodyState>>,
+    angles: Vec<Vec<f32>>,
+}
+
+impl GaitReference {
+    /// The cycle of `demo`'s clip `clip` at control step `dt`, its period rounded to whole steps.
+    /// `None` for a clip shorter than two steps.
+    pub fn new(model: &CharacterModel, demo: &DemoMotion, clip: usize, dt: f32) -> Option<Self> {
+        let duration = demo.clips().nth(clip)?.1;
+        let n = (duration / dt).round() as usize;
+        if n < 2 {
+            return None;
+        }
+        let frames: Vec<Vec<BodyState>> = (0..n)
+            .map(|k| demo.body_states_at(clip, k as f32 * dt))
+            .collect();
+        let angles = (0..n)
+            .map(|k| joint_angles(model, &frames[(k + 1) % n]))
+            .collect();
+        Some(Self {
+            clip,
+            dt,
+            frames,
+            angles,
+        })
+    }
+
+    /// Control steps in one cycle.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// The reference at step `k` of the cycle (wrapping), and the joint angles for the step after.
+    pub fn at(&self, k: usize) -> (&[BodyState], &[f32]) {
+        let k = k % self.frames.len();
+        (&self.frames[k], &self.angles[k])
+    }
+
+    /// The clip time (s) of step `k`.
+    pub fn time(&self, k: usize) -> f32 {
+        (k % self.frames.len()) as f32 * self.dt
+    }
+
+    /// The cycle's phase at step `k`, in [0, 1).
+    pub fn phase(&self, k: usize) -> f32 {
+        (k % self.frames.len()) as f32 / self.frames.len() as f32
+    }
+}
+
+/// The gait cycle of the first clip in `demo` whose name contains `clip`, at control step `dt`;
+/// an error naming the clip when none is installed or it is too short.
+pub fn reference_for(
+    model: &CharacterModel,
+    demo: &DemoMotion,
+    clip: &str,
+    dt: f32,
+) -> Result<GaitReference, String> {
+    let index = demo
+        .clips()
+        .position(|(name, _)| name.contains(clip))
+        .ok_or_else(|| format!("[env.gait] clip {clip:?}: no installed clip has that name"))?;
+    GaitReference::new(model, demo, index, dt)
+        .ok_or_else(|| format!("[env.gait] clip {clip:?}: shorter than two control steps"))
+}

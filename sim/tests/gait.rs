@@ -1,0 +1,208 @@
+//! The residual base (`[env.gait]`, `lhm_sim::gait`) on hand-built states and a synthetic clip
+//! (no downloads): feedback terms on known errors, the cycle's sampling, and the environment's
+//! residual actions and phase observation.
+
+use lhm_scenes::Benchmark;
+use lhm_sim::env::{EnvConfig, GaitConfig, TaskEnv};
+use lhm_sim::fidelity::joint_angles;
+use lhm_sim::gait::{base_targets, reference_for, BalanceGains, GaitReference, Rig};
+use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
+use lhm_sim::obs::BodyState;
+use lhm_sim::{CharacterModel, SimConfig};
+use rapier3d::math::{Rotation, Vector};
+use std::sync::Arc;
+
+/// The right leg forward and lifted (left foot lower: left stance), slightly turned.
+fn stride(model: &CharacterModel) -> Vec<BodyState> {
+    let mut local_rots = vec![Rotation::IDENTITY; model.bodies.len()];
+    local_rots[model.body_index("right_thigh").unwrap()] = Rotation::from_rotation_y(-0.5);
+    local_rots[model.body_index("right_shin").unwrap()] = Rotation::from_rotation_y(0.6);
+    let pose = KinematicPose {
+        root_pos: Vector::new(0.3, -0.2, 0.9),
+        root_rot: Rotation::from_rotation_z(0.4),
+        local_rots,
+    };
+    forward_kinematics(model, &pose)
+        .into_iter()
+        .map(|(pos, rot)| BodyState {
+            pos,
+            rot,
+            linvel: Vector::new(0.8, 0.3, 0.0),
+            angvel: Vector::ZERO,
+        })
+        .collect()
+}
+
+fn dof(model: &CharacterModel, name: &str) -> usize {
+    model.dofs.iter().position(|d| d.name == name).unwrap()
+}
+
+#[test]
+fn on_its_reference_the_base_is_the_reference_plus_the_constant_offsets() {
+    let model = CharacterModel::amp_humanoid();
+    let rig = Rig::new(&model).unwrap();
+    let states = stride(&model);
+    assert_eq!(rig.stance(&states), 1, "the left foot is the lower one");
+    let angles: Vec<f32> = (0..model.dofs.len()).map(|i| 0.01 * i as f32).collect();
+    let g = BalanceGains::default();
+    let t = base_targets(&rig, &g, &states, &states, &angles);
+    for (i, (t, a)) in t.iter().zip(&angles).enumerate() {
+        let offset = match model.dofs[i].name.as_str() {
+            "right_knee" => g.swing_knee_bias,
+            "left_knee" => g.stance_knee_bias,
+            "right_hip_y" => g.swing_hip_bias,
+            _ => 0.0,
+        };
+        assert!(
+            (t - a - offset).abs() < 1e-5,
+            "{}: {t} vs {a} + {offset}",
+            model.dofs[i].name
+        );
+    }
+}
+
+#[test]
+fn a_faster_centre_of_mass_moves_the_swing_hip_and_the_stance_ankle_by_their_gains() {
+    let model = CharacterModel::amp_humanoid();
+    let rig = Rig::new(&model).unwrap();
+    let reference = stride(&model);
+    // The character 0.5 m/s faster along its own heading, everything else as the reference.
+    let heading = Rotation::from_rotation_z(0.4);
+    let faster: Vec<BodyState> = reference
+        .iter()
+        .map(|b| BodyState {
+            linvel: b.linvel + heading * Vector::new(0.5, 0.0, 0.0),
+            ..*b
+        })
+        .collect();
+    let angles = vec![0.0; model.dofs.len()];
+    let g = BalanceGains {
+        swing_hip_bias: 0.0,
+        swing_knee_bias: 0.0,
+        stance_knee_bias: 0.0,
+        ..BalanceGains::default()
+    };
+    let t = base_targets(&rig, &g, &faster, &reference, &angles);
+    let expect = [
+        ("right_hip_y", g.swing_v_fwd * 0.5),
+        ("left_ankle_y", g.ankle_v_fwd * 0.5),
+        ("right_hip_x", 0.0),
+        ("left_hip_y", 0.0),
+        ("left_ankle_x", 0.0),
+    ];
+    for (name, want) in expect {
+        let got = t[dof(&model, name)];
+        assert!((got - want).abs() < 1e-4, "{name}: {got} vs {want}");
+    }
+}
+
+/// 1.2 s at 30 fps: a stepping cycle (the feet take turns being lower) that moves forward.
+fn cycle_clip(model: &CharacterModel) -> Vec<KinematicPose> {
+    let (rt, lt) = (
+        model.body_index("right_thigh").unwrap(),
+        model.body_index("left_thigh").unwrap(),
+    );
+    (0..37)
+        .map(|i| {
+            let s = (std::f32::consts::TAU * i as f32 / 36.0).sin();
+            let mut local_rots = vec![Rotation::IDENTITY; model.bodies.len()];
+            local_rots[rt] = Rotation::from_rotation_y(-0.3 * s);
+            local_rots[lt] = Rotation::from_rotation_y(0.3 * s);
+            KinematicPose {
+                root_pos: Vector::new(i as f32 / 30.0, 0.0, 0.9),
+                root_rot: Rotation::IDENTITY,
+                local_rots,
+            }
+        })
+        .collect()
+}
+
+fn cycle_demo(model: &CharacterModel) -> DemoMotion {
+    DemoMotion::from_clips(
+        model,
+        vec![("cycle_walk".into(), cycle_clip(model), 1.0 / 30.0)],
+        AmpWindow::of(&EnvConfig::default(), &SimConfig::default()),
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_cycle_is_sampled_at_the_control_step_and_wraps() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let dt = 1.0 / 30.0;
+    let r = GaitReference::new(&model, &demo, 0, dt).unwrap();
+    assert_eq!(r.len(), 36, "1.2 s at 30 Hz");
+    let (frame, angles) = r.at(5);
+    let want = demo.body_states_at(0, 5.0 * dt);
+    assert!((frame[0].pos - want[0].pos).length() < 1e-5);
+    let next = joint_angles(&model, &demo.body_states_at(0, 6.0 * dt));
+    for (a, b) in angles.iter().zip(&next) {
+        assert!((a - b).abs() < 1e-4, "the angles are the next step's");
+    }
+    assert_eq!(r.at(36 + 5).0[0].pos, frame[0].pos, "wraps");
+    assert!((r.phase(45) - 0.25).abs() < 1e-6);
+    assert!(reference_for(&model, &demo, "cycle", dt).is_ok());
+    let err = reference_for(&model, &demo, "run", dt).unwrap_err();
+    assert!(err.contains("\"run\""), "{err}");
+}
+
+fn gait_env(model: &CharacterModel, gait: Option<GaitConfig>) -> TaskEnv {
+    let bench = Benchmark::embedded().unwrap();
+    let (_, task) = bench.task("train-0001").unwrap();
+    let config = EnvConfig {
+        gait,
+        ..EnvConfig::default()
+    };
+    TaskEnv::new(model, &task, &bench.catalogue, SimConfig::default(), config)
+}
+
+#[test]
+fn in_the_gait_actions_are_residuals_on_the_base_and_the_policy_reads_the_phase() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let plain = gait_env(&model, None);
+    let mut env = gait_env(&model, Some(GaitConfig::default()));
+    let dim = TaskEnv::obs_dim(&model, &env.config);
+    assert_eq!(dim, TaskEnv::obs_dim(&model, &plain.config) + 2);
+    // Before the gait starts the phase reads as zeros.
+    let obs = env.observation();
+    assert_eq!(obs.len(), dim);
+    assert_eq!(&obs[dim - 2..], &[0.0, 0.0]);
+    let yaw = env.yaw_toward_first_object();
+    assert!(env.start_in_gait(&demo, Arc::clone(&reference), 9, yaw));
+    assert!(env.demo_start);
+    assert_eq!(env.gait_phase(), Some(0.25));
+    let obs = env.observation();
+    assert!(
+        (obs[dim - 2] - 1.0).abs() < 1e-5 && obs[dim - 1].abs() < 1e-5,
+        "sin, cos of 1/4 turn"
+    );
+    // Two copies of the same state: one zero action and one residual differ in the world by
+    // what the residual adds to the base.
+    let mut other = gait_env(&model, Some(GaitConfig::default()));
+    other.start_in_gait(&demo, Arc::clone(&reference), 9, yaw);
+    let knee = dof(&model, "left_knee");
+    let mut action = vec![0.0; model.dofs.len()];
+    action[knee] = 1.0;
+    env.step(&vec![0.0; model.dofs.len()]);
+    other.step(&action);
+    assert_eq!(
+        env.gait_phase(),
+        Some(10.0 / 36.0),
+        "the gait moved on a step"
+    );
+    let bend = |e: &TaskEnv| joint_angles(&model, &e.world.body_states())[knee];
+    assert!(
+        bend(&other) > bend(&env) + 0.01,
+        "{} vs {}",
+        bend(&other),
+        bend(&env)
+    );
+    // Without [env.gait] nothing starts and actions stay absolute.
+    let mut plain = plain;
+    assert!(!plain.start_gait(reference, 0));
+    assert_eq!(plain.gait_phase(), None);
+}
