@@ -90,6 +90,10 @@ pub struct GaitConfig {
     /// `steer_max` either way.
     pub steer_gain: f32,
     pub steer_max: f32,
+    /// Once the root comes this close (m, horizontally) to the current object the base stops
+    /// walking: its targets become the neutral standing pose (zero joint angles) for the rest of
+    /// the episode, and the phase reads as zeros. 0: never stop.
+    pub stop_distance: f32,
     pub gains: BalanceGains,
 }
 
@@ -102,6 +106,7 @@ impl Default for GaitConfig {
             // a goal 30-60° off; at 0.1 it survives as long as walking straight (gait_probe).
             steer_gain: 0.1,
             steer_max: 0.2,
+            stop_distance: 0.0,
             gains: BalanceGains::default(),
         }
     }
@@ -112,6 +117,8 @@ impl Default for GaitConfig {
 struct GaitRun {
     reference: Arc<GaitReference>,
     step: usize,
+    /// The gait came within `stop_distance` of an object and stands from then on.
+    stopped: bool,
 }
 
 impl Default for EnvConfig {
@@ -376,7 +383,11 @@ impl TaskEnv {
         if self.config.gait.is_none() || self.rig.is_none() || reference.is_empty() {
             return false;
         }
-        self.gait = Some(GaitRun { reference, step });
+        self.gait = Some(GaitRun {
+            reference,
+            step,
+            stopped: false,
+        });
         true
     }
 
@@ -398,9 +409,12 @@ impl TaskEnv {
         self.start_gait(reference, step)
     }
 
-    /// The gait's phase in its cycle, [0, 1), while one runs.
+    /// The gait's phase in its cycle, [0, 1), while one runs and walks.
     pub fn gait_phase(&self) -> Option<f32> {
-        self.gait.as_ref().map(|g| g.reference.phase(g.step))
+        self.gait
+            .as_ref()
+            .filter(|g| !g.stopped)
+            .map(|g| g.reference.phase(g.step))
     }
 
     pub fn obs_dim(model: &CharacterModel, config: &EnvConfig) -> usize {
@@ -546,8 +560,6 @@ impl TaskEnv {
             self.config.gait.as_ref()?,
         );
         let now = self.world.body_states();
-        let (reference_now, angles) = run.reference.at(run.step);
-        let mut targets = base_targets(rig, &config.gains, &now, reference_now, angles);
         let last = self.task.sequence.len().saturating_sub(1);
         let object = self
             .task
@@ -556,6 +568,20 @@ impl TaskEnv {
             .and_then(|step| self.task.object_index(&step.object))
             .and_then(|i| self.world.object_pose(i));
         if let (Some(object), Some(root)) = (object, now.first()) {
+            let flat = Vector::new(
+                object.translation.x - root.pos.x,
+                object.translation.y - root.pos.y,
+                0.0,
+            );
+            run.stopped |= flat.length() < config.stop_distance;
+        }
+        let (reference_now, angles) = run.reference.at(run.step);
+        let mut targets = if run.stopped {
+            vec![0.0; self.model.dofs.len()]
+        } else {
+            base_targets(rig, &config.gains, &now, reference_now, angles)
+        };
+        if let (Some(object), Some(root), false) = (object, now.first(), run.stopped) {
             let facing = root.rot * Vector::X;
             let to = object.translation - root.pos;
             let error = (to.y.atan2(to.x) - facing.y.atan2(facing.x) + std::f32::consts::PI)

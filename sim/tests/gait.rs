@@ -206,3 +206,31 @@ fn in_the_gait_actions_are_residuals_on_the_base_and_the_policy_reads_the_phase(
     assert!(!plain.start_gait(reference, 0));
     assert_eq!(plain.gait_phase(), None);
 }
+
+#[test]
+fn within_the_stop_distance_the_base_stands_and_the_phase_reads_zero() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let gait = GaitConfig {
+        stop_distance: 100.0,
+        ..GaitConfig::default()
+    };
+    let mut env = gait_env(&model, Some(gait));
+    let yaw = env.yaw_toward_first_object();
+    env.start_in_gait(&demo, reference, 9, yaw);
+    assert_eq!(env.gait_phase(), Some(0.25), "walking until the first step");
+    // Zero action: the neutral pose's targets, which pull every joint toward 0 (the right hip
+    // starts 0.3 rad back at a quarter of the synthetic cycle).
+    let hip = dof(&model, "right_hip_y");
+    let before = joint_angles(&model, &env.world.body_states())[hip].abs();
+    assert!(before > 0.25, "{before}");
+    for _ in 0..5 {
+        env.step(&vec![0.0; model.dofs.len()]);
+    }
+    assert_eq!(env.gait_phase(), None, "stopped");
+    let dim = TaskEnv::obs_dim(&model, &env.config);
+    assert_eq!(&env.observation()[dim - 2..], &[0.0, 0.0]);
+    let after = joint_angles(&model, &env.world.body_states())[hip].abs();
+    assert!(after < before - 0.1, "hip {before} -> {after}");
+}
