@@ -16,7 +16,8 @@
 //! `SIGMA`, `ELITIST=1` for a (1+λ) search around the best at a fixed step). It prints every new
 //! best as an `eval` string. One set: `gait_probe eval g0,g1,…` (`TRACE=1` per-step errors,
 //! `GIF=out.gif` [`GIF_PHASE`] a rollout, `STEER=gain GOAL_ANGLE=rad` steering toward a goal
-//! 3 m away at that angle, travel then counts the distance gained toward it).
+//! 3 m away at that angle, travel then counts the distance gained toward it). `SYNC_WAIT=n
+//! SYNC_SKIP=m` keep the cycle in time with the footfalls (`GaitReference::advance`).
 
 use lhm_scenes::Benchmark;
 use lhm_sim::env::{EnvConfig, TaskEnv};
@@ -40,6 +41,8 @@ struct Setup {
     /// this gain per radian of heading error; 0 gain: no steering, walk on.
     goal_angle: f32,
     steer_gain: f32,
+    /// Footfall synchronisation: (max_wait, max_skip) steps, `GaitReference::advance`.
+    sync: (usize, usize),
 }
 
 /// One rollout from `phase` (fraction of the cycle): (control steps up, ground travel in m).
@@ -79,9 +82,10 @@ fn rollout_traced(
             );
     let ch = env.world.character.clone();
     let mut up = 0;
+    let (mut step, mut waited) = (k0, 0);
     for k in 0..steps {
         let now = env.world.body_states();
-        let (reference_now, angles) = s.reference.at(k0 + k);
+        let (reference_now, angles) = s.reference.at(step);
         let mut targets = base_targets(&s.rig, &gains, &now, reference_now, angles);
         if s.steer_gain != 0.0 {
             let f = now[0].rot * Vector::X;
@@ -106,6 +110,9 @@ fn rollout_traced(
             .enumerate()
             .map(|(i, q)| (q - ch.action_offset[i]) / ch.action_scale[i])
             .collect();
+        step = s
+            .reference
+            .advance(&s.rig, step, &now, &mut waited, s.sync.0, s.sync.1);
         env.step(&action);
         if let Some(frames) = frames.as_deref_mut() {
             if k % 2 == 0 {
@@ -200,6 +207,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         env_config,
         goal_angle: env_f32("GOAL_ANGLE", 0.0),
         steer_gain: env_f32("STEER", 0.0),
+        sync: (
+            env_f32("SYNC_WAIT", 0.0) as usize,
+            env_f32("SYNC_SKIP", 0.0) as usize,
+        ),
     };
     if let Some(g) = fixed {
         for p in PHASES {

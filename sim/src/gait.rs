@@ -282,6 +282,10 @@ pub fn steer(rig: &Rig, targets: &mut [f32], reference_now: &[BodyState], yaw: f
     targets[rig.hip_z[stance]] -= yaw;
 }
 
+/// A foot whose body origin is below this height (m) is on the ground: its box's sole is 5 cm
+/// below the origin.
+pub const CONTACT_HEIGHT: f32 = 0.07;
+
 /// One cycle of a looped clip sampled at the control rate: per control step, every body's state
 /// (in the clip's own frame) and the joint angles the step after it.
 #[derive(Clone, Debug)]
@@ -334,6 +338,39 @@ impl GaitReference {
     /// The clip time (s) of step `k`.
     pub fn time(&self, k: usize) -> f32 {
         (k % self.frames.len()) as f32 * self.dt
+    }
+
+    /// The cycle step after `step`, kept in time with the character's footfalls (SIMBICON switches
+    /// its state machine on touchdown; a clock runs on while the foot lands early or late). When
+    /// the reference's next step changes the stance foot but the character's swing foot (origin
+    /// above `CONTACT_HEIGHT`) has not landed, the cycle waits, at most `max_wait` steps in a row
+    /// (`waited` counts them); when the swing foot has landed up to `max_skip` steps before the
+    /// reference's footfall, the cycle jumps to the step where the reference's new stance begins. `max_wait = max_skip = 0` is the plain clock.
+    pub fn advance(
+        &self,
+        rig: &Rig,
+        step: usize,
+        now: &[BodyState],
+        waited: &mut usize,
+        max_wait: usize,
+        max_skip: usize,
+    ) -> usize {
+        let stance = rig.stance(self.at(step).0);
+        let landed = now[rig.foot[1 - stance]].pos.z < CONTACT_HEIGHT;
+        if rig.stance(self.at(step + 1).0) != stance {
+            if !landed && *waited < max_wait {
+                *waited += 1;
+                return step;
+            }
+        } else if landed {
+            if let Some(k) = (2..=max_skip + 1).find(|&k| rig.stance(self.at(step + k).0) != stance)
+            {
+                *waited = 0;
+                return step + k;
+            }
+        }
+        *waited = 0;
+        step + 1
     }
 
     /// The cycle's phase at step `k`, in [0, 1).

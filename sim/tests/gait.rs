@@ -234,3 +234,80 @@ fn within_the_stop_distance_the_base_stands_and_the_phase_reads_zero() {
     let after = joint_angles(&model, &env.world.body_states())[hip].abs();
     assert!(after < before - 0.1, "hip {before} -> {after}");
 }
+
+/// `cycle_clip` with the swinging leg's knee bent, so the feet take turns being lower.
+fn stepping_demo(model: &CharacterModel) -> DemoMotion {
+    let (rs, ls) = (
+        model.body_index("right_shin").unwrap(),
+        model.body_index("left_shin").unwrap(),
+    );
+    let mut clip = cycle_clip(model);
+    for (i, pose) in clip.iter_mut().enumerate() {
+        let s = (std::f32::consts::TAU * i as f32 / 36.0).sin();
+        pose.local_rots[rs] = Rotation::from_rotation_y(0.6 * s.max(0.0));
+        pose.local_rots[ls] = Rotation::from_rotation_y(0.6 * (-s).max(0.0));
+    }
+    DemoMotion::from_clips(
+        model,
+        vec![("cycle_walk".into(), clip, 1.0 / 30.0)],
+        AmpWindow::of(&EnvConfig::default(), &SimConfig::default()),
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_cycle_waits_for_a_late_footfall_and_jumps_to_an_early_one() {
+    let model = CharacterModel::amp_humanoid();
+    let rig = Rig::new(&model).unwrap();
+    let r = GaitReference::new(&model, &stepping_demo(&model), 0, 1.0 / 30.0).unwrap();
+    let stance = |k: usize| rig.stance(r.at(k).0);
+    // The reference's footfall: the last step before the stance foot changes.
+    let before = (0..r.len()).find(|&k| stance(k + 1) != stance(k)).unwrap();
+    let shifted = |dz: f32| -> Vec<BodyState> {
+        r.at(before)
+            .0
+            .iter()
+            .map(|b| BodyState {
+                pos: b.pos + Vector::new(0.0, 0.0, dz),
+                ..*b
+            })
+            .collect()
+    };
+    let (airborne, grounded) = (shifted(0.5), shifted(-1.0));
+    let mut waited = 0;
+    // The swing foot still in the air at the footfall: wait, at most twice.
+    assert_eq!(
+        r.advance(&rig, before, &airborne, &mut waited, 2, 0),
+        before
+    );
+    assert_eq!(
+        r.advance(&rig, before, &airborne, &mut waited, 2, 0),
+        before
+    );
+    assert_eq!(
+        r.advance(&rig, before, &airborne, &mut waited, 2, 0),
+        before + 1
+    );
+    assert_eq!(waited, 0);
+    // Landed at the footfall: on.
+    assert_eq!(
+        r.advance(&rig, before, &grounded, &mut waited, 2, 0),
+        before + 1
+    );
+    // Landed 3 steps before the reference's footfall: a jump to where its new stance begins
+    // (4 steps on) with max_skip 3, not with 1.
+    let early = before + r.len() - 3;
+    assert_eq!(
+        r.advance(&rig, early, &grounded, &mut waited, 0, 3),
+        early + 4
+    );
+    assert_eq!(
+        r.advance(&rig, early, &grounded, &mut waited, 0, 1),
+        early + 1
+    );
+    // The plain clock.
+    assert_eq!(
+        r.advance(&rig, before, &airborne, &mut waited, 0, 0),
+        before + 1
+    );
+}
