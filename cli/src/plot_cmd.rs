@@ -31,6 +31,8 @@ const PANELS: &[(&str, &str)] = &[
     ("mean_episode_length", "episode length (steps)"),
     ("fall_fraction", "fall fraction"),
     ("reach_rate", "reach rate (task starts)"),
+    // Every episode's reach, demo and gait starts too (a run with [env.gait] has no task starts).
+    ("reach_rate_all", "reach rate (all starts)"),
     ("disc_accuracy", "discriminator accuracy"),
     ("style_reward", "style reward"),
     ("task_reward", "task reward"),
