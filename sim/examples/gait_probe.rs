@@ -23,6 +23,7 @@ use lhm_scenes::Benchmark;
 use lhm_sim::env::{EnvConfig, TaskEnv};
 use lhm_sim::gait::{balance, base_targets, steer, BalanceGains, GaitReference, Rig};
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::obs::HeadingFrame;
 use lhm_sim::render::{render, write_gif, Camera, Image};
 use lhm_sim::{CharacterModel, SimConfig};
 use rapier3d::math::Vector;
@@ -88,11 +89,8 @@ fn rollout_traced(
         let (reference_now, angles) = s.reference.at(step);
         let mut targets = base_targets(&s.rig, &gains, &now, reference_now, angles);
         if s.steer_gain != 0.0 {
-            let f = now[0].rot * Vector::X;
-            let to = goal - now[0].pos;
-            let err = (to.y.atan2(to.x) - f.y.atan2(f.x) + std::f32::consts::PI)
-                .rem_euclid(std::f32::consts::TAU)
-                - std::f32::consts::PI;
+            let to = HeadingFrame::of(&now[0]).vector(goal - now[0].pos);
+            let err = to.y.atan2(to.x);
             steer(&s.rig, &mut targets, reference_now, s.steer_gain * err, 0.3);
         }
         if trace && k % 3 == 0 {

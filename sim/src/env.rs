@@ -8,7 +8,7 @@ use crate::motion::demo::DemoMotion;
 use crate::motion::retarget::KinematicPose;
 use crate::obs::{
     amp_frame, amp_frame_dim, finite_difference_states, obstacle_map, proprioception,
-    proprioception_dim, task_observation, AmpHistory, BodyState, TASK_OBS_DIM,
+    proprioception_dim, task_observation, AmpHistory, BodyState, HeadingFrame, TASK_OBS_DIM,
 };
 use crate::task::cycles::{CycleTracker, Handoff, SwitchParams};
 use crate::task::rewards::{self, ReleaseRetreat, RewardWeights};
@@ -554,26 +554,22 @@ impl TaskEnv {
     /// object, plus the action as a residual (within each joint's range); the gait moves on a
     /// step. `None` when no gait runs.
     fn gait_targets(&mut self, action: &[f32]) -> Option<Vec<f32>> {
+        let now = self.world.body_states();
+        let last = self.task.sequence.len().saturating_sub(1);
+        // The current object in the root's heading frame (after the last handoff, the last one).
+        let object = self
+            .pair(self.cycles.current.min(last))
+            .zip(now.first())
+            .map(|((i, _, _), root)| {
+                HeadingFrame::of(root).vector(self.object_state(i).pos - root.pos)
+            });
         let (run, rig, config) = (
             self.gait.as_mut()?,
             self.rig.as_ref()?,
             self.config.gait.as_ref()?,
         );
-        let now = self.world.body_states();
-        let last = self.task.sequence.len().saturating_sub(1);
-        let object = self
-            .task
-            .sequence
-            .get(self.cycles.current.min(last))
-            .and_then(|step| self.task.object_index(&step.object))
-            .and_then(|i| self.world.object_pose(i));
-        if let (Some(object), Some(root)) = (object, now.first()) {
-            let flat = Vector::new(
-                object.translation.x - root.pos.x,
-                object.translation.y - root.pos.y,
-                0.0,
-            );
-            run.stopped |= flat.length() < config.stop_distance;
+        if let Some(to) = object {
+            run.stopped |= Vector::new(to.x, to.y, 0.0).length() < config.stop_distance;
         }
         let (reference_now, angles) = run.reference.at(run.step);
         let mut targets = if run.stopped {
@@ -581,12 +577,8 @@ impl TaskEnv {
         } else {
             base_targets(rig, &config.gains, &now, reference_now, angles)
         };
-        if let (Some(object), Some(root), false) = (object, now.first(), run.stopped) {
-            let facing = root.rot * Vector::X;
-            let to = object.translation - root.pos;
-            let error = (to.y.atan2(to.x) - facing.y.atan2(facing.x) + std::f32::consts::PI)
-                .rem_euclid(std::f32::consts::TAU)
-                - std::f32::consts::PI;
+        if let (Some(to), false) = (object, run.stopped) {
+            let error = to.y.atan2(to.x);
             steer(
                 rig,
                 &mut targets,

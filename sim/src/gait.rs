@@ -15,7 +15,7 @@
 use crate::fidelity::joint_angles;
 use crate::mjcf::CharacterModel;
 use crate::motion::demo::DemoMotion;
-use crate::obs::BodyState;
+use crate::obs::{BodyState, HeadingFrame};
 use rapier3d::math::{Rotation, Vector};
 use serde::{Deserialize, Serialize};
 
@@ -207,11 +207,6 @@ pub struct Balance {
     pub rate: Vector,
 }
 
-fn heading(rot: Rotation) -> Rotation {
-    let f = rot * Vector::X;
-    Rotation::from_rotation_z(f.y.atan2(f.x))
-}
-
 /// The rotation vector of `a · b⁻¹`, the short way round.
 fn rotation_error(a: Rotation, b: Rotation) -> Vector {
     let q = (a * b.inverse()).normalize();
@@ -226,15 +221,15 @@ pub fn balance(rig: &Rig, states: &[BodyState], stance: usize) -> Balance {
         v += s.linvel * *m;
     }
     let (p, v) = (p / total, v / total);
-    let h = heading(states[0].rot).inverse();
-    let mut d = h * (p - states[rig.foot[stance]].pos);
+    let h = HeadingFrame::of(&states[0]);
+    let mut d = h.vector(p - states[rig.foot[stance]].pos);
     d.z = 0.0;
     Balance {
         d,
-        v: h * v,
-        pelvis: h * states[0].rot,
-        torso: h * states[rig.torso].rot,
-        rate: h * states[0].angvel,
+        v: h.vector(v),
+        pelvis: h.rotation(states[0].rot),
+        torso: h.rotation(states[rig.torso].rot),
+        rate: h.vector(states[0].angvel),
     }
 }
 
