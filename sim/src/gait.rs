@@ -150,17 +150,17 @@ impl BalanceGains {
 /// DoF and body indices the feedback acts on, legs as [right, left].
 #[derive(Clone, Debug)]
 pub struct Rig {
-    hip_x: [usize; 2],
-    hip_y: [usize; 2],
-    hip_z: [usize; 2],
-    knee: [usize; 2],
-    ankle_x: [usize; 2],
-    ankle_y: [usize; 2],
-    abdomen_x: usize,
-    abdomen_y: usize,
-    foot: [usize; 2],
-    torso: usize,
-    masses: Vec<f32>,
+    pub hip_x: [usize; 2],
+    pub hip_y: [usize; 2],
+    pub hip_z: [usize; 2],
+    pub knee: [usize; 2],
+    pub ankle_x: [usize; 2],
+    pub ankle_y: [usize; 2],
+    pub abdomen_x: usize,
+    pub abdomen_y: usize,
+    pub foot: [usize; 2],
+    pub torso: usize,
+    pub masses: Vec<f32>,
 }
 
 impl Rig {
@@ -208,12 +208,17 @@ pub struct Balance {
 }
 
 /// The rotation vector of `a · b⁻¹`, the short way round.
-fn rotation_error(a: Rotation, b: Rotation) -> Vector {
+pub fn rotation_error(a: Rotation, b: Rotation) -> Vector {
     let q = (a * b.inverse()).normalize();
     if q.w < 0.0 { -q } else { q }.to_scaled_axis()
 }
 
 pub fn balance(rig: &Rig, states: &[BodyState], stance: usize) -> Balance {
+    balance_about(rig, states, states[rig.foot[stance]].pos)
+}
+
+/// [`Balance`] with the centre of mass's offset taken from `anchor` (a point on the ground).
+pub fn balance_about(rig: &Rig, states: &[BodyState], anchor: Vector) -> Balance {
     let total: f32 = rig.masses.iter().sum::<f32>().max(f32::EPSILON);
     let (mut p, mut v) = (Vector::ZERO, Vector::ZERO);
     for (s, m) in states.iter().zip(&rig.masses) {
@@ -222,7 +227,7 @@ pub fn balance(rig: &Rig, states: &[BodyState], stance: usize) -> Balance {
     }
     let (p, v) = (p / total, v / total);
     let h = HeadingFrame::of(&states[0]);
-    let mut d = h.vector(p - states[rig.foot[stance]].pos);
+    let mut d = h.vector(p - anchor);
     d.z = 0.0;
     Balance {
         d,
@@ -242,12 +247,27 @@ pub fn base_targets(
     reference_now: &[BodyState],
     reference_next: &[f32],
 ) -> Vec<f32> {
+    braking_targets(rig, gains, now, reference_now, reference_next, 1.0)
+}
+
+/// [`base_targets`] against the reference's centre-of-mass velocity times `speed`: at 0 every
+/// bit of the character's velocity is an error, so the swing foot lands further ahead and the
+/// stance ankle pushes back (a braking step before a stop).
+pub fn braking_targets(
+    rig: &Rig,
+    gains: &BalanceGains,
+    now: &[BodyState],
+    reference_now: &[BodyState],
+    reference_next: &[f32],
+    speed: f32,
+) -> Vec<f32> {
     let g = gains;
     let mut t = reference_next.to_vec();
     let stance = rig.stance(reference_now);
     let swing = 1 - stance;
     let c = balance(rig, now, stance);
-    let r = balance(rig, reference_now, stance);
+    let mut r = balance(rig, reference_now, stance);
+    r.v *= speed;
     let dd = c.d - r.d;
     let dv = c.v - r.v;
     let e = rotation_error(c.pelvis, r.pelvis);
@@ -366,6 +386,13 @@ impl GaitReference {
         }
         *waited = 0;
         step + 1
+    }
+
+    /// Whether the reference's swing foot lands at step `k` (its lower foot changes): the step of
+    /// the cycle where both its feet are down, the moment a stop can freeze without a foot in the air.
+    pub fn footfall(&self, rig: &Rig, k: usize) -> bool {
+        let n = self.frames.len();
+        rig.stance(self.at(k).0) != rig.stance(self.at(k + n - 1).0)
     }
 
     /// The cycle's phase at step `k`, in [0, 1).

@@ -5,7 +5,9 @@
 use lhm_scenes::Benchmark;
 use lhm_sim::env::{EnvConfig, GaitConfig, TaskEnv};
 use lhm_sim::fidelity::joint_angles;
-use lhm_sim::gait::{base_targets, reference_for, BalanceGains, GaitReference, Rig};
+use lhm_sim::gait::{
+    base_targets, braking_targets, reference_for, BalanceGains, GaitReference, Rig,
+};
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
 use lhm_sim::obs::BodyState;
@@ -94,6 +96,45 @@ fn a_faster_centre_of_mass_moves_the_swing_hip_and_the_stance_ankle_by_their_gai
     for (name, want) in expect {
         let got = t[dof(&model, name)];
         assert!((got - want).abs() < 1e-4, "{name}: {got} vs {want}");
+    }
+}
+
+#[test]
+fn braking_counts_the_reference_speed_it_drops_as_velocity_error() {
+    let model = CharacterModel::amp_humanoid();
+    let rig = Rig::new(&model).unwrap();
+    let reference = stride(&model);
+    // Both the reference and the character move at 0.8 m/s along the heading.
+    let heading = Rotation::from_rotation_z(0.4);
+    let moving: Vec<BodyState> = reference
+        .iter()
+        .map(|b| BodyState {
+            linvel: heading * Vector::new(0.8, 0.0, 0.0),
+            ..*b
+        })
+        .collect();
+    let angles = vec![0.0; model.dofs.len()];
+    let g = BalanceGains::default();
+    let walking = braking_targets(&rig, &g, &moving, &moving, &angles, 1.0);
+    assert_eq!(walking, base_targets(&rig, &g, &moving, &moving, &angles));
+    // At speed 0 the reference's 0.8 m/s forward is all error; at 0.5, half of it.
+    for (speed, error) in [(0.0, 0.8), (0.5, 0.4)] {
+        let braking = braking_targets(&rig, &g, &moving, &moving, &angles, speed);
+        for (name, gain) in [
+            ("right_hip_y", g.swing_v_fwd),
+            ("left_ankle_y", g.ankle_v_fwd),
+        ] {
+            let (d, want) = (
+                braking[dof(&model, name)] - walking[dof(&model, name)],
+                gain * error,
+            );
+            assert!(
+                (d - want).abs() < 1e-4,
+                "speed {speed}, {name}: {d} vs {want}"
+            );
+        }
+        let lat = dof(&model, "right_hip_x");
+        assert!((braking[lat] - walking[lat]).abs() < 1e-5);
     }
 }
 

@@ -1,0 +1,554 @@
+//! `cargo run --release -p lhm-sim --example gait_probe -- [ITERATIONS] [CLIP]`: can a handful of
+//! balance-feedback gains turn open-loop tracking of a looped walk into a walk that does not fall?
+//!
+//! Open-loop tracking (the clip's own joint angles as PD targets, `track_clip`) falls within
+//! ~1 s. SIMBICON (Yin, Loken, van de Panne 2007) and data-driven biped control (Lee, Kim, Lee
+//! 2010) keep such a reference up with a few feedback terms on top of it: the swing hip places the
+//! foot by the centre of mass's position and velocity error against the reference, the stance hip
+//! holds the pelvis's tilt, the stance ankle brakes. Their gains are found here by an evolution
+//! strategy on the simulator itself (a few hundred rollouts, each 10 s from one of eight phases of
+//! the clip). If such a controller walks, it is a base a residual policy can steer (DReCon's
+//! kinematic reference + learned correction) instead of discovering stepping from noise.
+//!
+//! Search: `gait_probe [ITERATIONS] [CLIP]` ((μ/μ, λ) ES from zeros, i.e. open-loop tracking;
+//! `START=default` or `START=g0,g1,…` (the order of `BalanceGains::NAMES`) to start elsewhere,
+//! `SIGMA`, `ELITIST=1` for a (1+λ) search around the best at a fixed step). It prints every new
+//! best as an `eval` string. One set: `gait_probe eval g0,g1,…` (`TRACE=1` per-step errors,
+//! `GIF=out.gif` [`GIF_PHASE`] a rollout, `STEER=gain GOAL_ANGLE=rad` steering toward a goal
+//! 3 m away at that angle, travel then counts the distance gained toward it). `SYNC_WAIT=n
+//! SYNC_SKIP=m` keep the cycle in time with the footfalls (`GaitReference::advance`).
+//!
+//! What a rollout is: `PHASES=n` starts (default 8) on task train-0001 (`EMPTY=1`: its
+//! furniture removed), or `ROOMS=1`: the environment's own `[env.gait]` in the first n training
+//! tasks, steering toward the object, scored as steps up + 100 per room whose object was reached.
+//! A rollout is up while the environment does not call it a fall and the root is above
+//! `UP_HEIGHT` (0.7 m). `TEMPO=x` plays the cycle at x of its speed. The stop (`stop.rs`):
+//! `STOP_AFTER=n` stops the i-th rollout after n + 7 i steps — a braking step against the
+//! reference's velocity times `BRAKE_SPEED`, then, once both feet are below `STOP_HEIGHT`
+//! (after at least `STOP_MIN`, at most `STOP_WAIT` steps; `STOP_ON=footfall`: at the
+//! reference's footfall), the pose held with ankle and hip strategies; `SEARCH=stand` (or
+//! `both`) searches the stop's gains instead of (or with) the walk's.
+
+use lhm_scenes::Benchmark;
+use lhm_sim::env::{EnvConfig, GaitConfig, TaskEnv};
+use lhm_sim::gait::{
+    balance, balance_about, braking_targets, steer, BalanceGains, GaitReference, Rig,
+};
+mod stop;
+use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::obs::HeadingFrame;
+use lhm_sim::render::{render, write_gif, Camera, Image};
+use lhm_sim::{CharacterModel, SimConfig};
+use rapier3d::math::Vector;
+use stop::{add_brake, feet_down, stand_targets, StandGains, StandHold};
+
+struct Setup {
+    model: CharacterModel,
+    rig: Rig,
+    demo: DemoMotion,
+    reference: GaitReference,
+    bench: Benchmark,
+    sim: SimConfig,
+    env_config: EnvConfig,
+    /// Steering toward a goal 3 m away at this angle (radians) off the start heading, with
+    /// this gain per radian of heading error; 0 gain: no steering, walk on.
+    goal_angle: f32,
+    steer_gain: f32,
+    /// Footfall synchronisation: (max_wait, max_skip) steps, `GaitReference::advance`.
+    sync: (usize, usize),
+    /// `STOP_AFTER=n`: the rollout from the i-th phase stops after n + 7 i steps: it walks on
+    /// until both feet are down (at most `STOP_WAIT` steps), then stands in that pose
+    /// (`stand_targets`). The search then tunes the standing gains (`SEARCH=stand`) or both.
+    stop_after: Option<usize>,
+    stop_wait: usize,
+    /// What the search's vector is: the walk's gains, the stand's, or both (walk first).
+    search: Search,
+    /// The gains not searched.
+    fixed: Gains,
+    empty: bool,
+    /// `STOP_ON=footfall`: freeze at the reference's next footfall instead of when both of the
+    /// character's feet are down.
+    stop_on_footfall: bool,
+    /// `STOP_HEIGHT`: both feet's origins below this count as down for the stop.
+    stop_height: f32,
+    /// `BRAKE_SPEED`: from the stop's trigger to the freeze the walk runs against the
+    /// reference's velocity times this (`braking_targets`); `STOP_MIN`: steps before a freeze.
+    brake_speed: f32,
+    stop_min: usize,
+    up_height: f32,
+    /// `TEMPO`: the cycle played at this fraction of its speed (its velocities scaled alike).
+    tempo: f32,
+    phases: usize,
+    /// `ROOMS=1`: each "phase" is a training task instead (`rollout_room`).
+    rooms: bool,
+    shared_reference: std::sync::Arc<GaitReference>,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Search {
+    Walk,
+    Stand,
+    Both,
+}
+
+#[derive(Clone, Copy)]
+struct Gains {
+    walk: BalanceGains,
+    stand: StandGains,
+}
+
+impl Setup {
+    fn dim(&self) -> usize {
+        match self.search {
+            Search::Walk => BalanceGains::LEN,
+            Search::Stand => StandGains::LEN,
+            Search::Both => BalanceGains::LEN + StandGains::LEN,
+        }
+    }
+
+    fn gains(&self, v: &[f32]) -> Gains {
+        let mut g = self.fixed;
+        let walk = |v: &[f32]| BalanceGains::from_array(std::array::from_fn(|i| v[i]));
+        let stand = |v: &[f32]| StandGains::from_array(std::array::from_fn(|i| v[i]));
+        match self.search {
+            Search::Walk => g.walk = walk(v),
+            Search::Stand => g.stand = stand(v),
+            Search::Both => {
+                g.walk = walk(v);
+                g.stand = stand(&v[BalanceGains::LEN..]);
+            }
+        }
+        g
+    }
+
+    fn vector(&self, g: &Gains) -> Vec<f32> {
+        match self.search {
+            Search::Walk => g.walk.to_array().to_vec(),
+            Search::Stand => g.stand.to_array().to_vec(),
+            Search::Both => [&g.walk.to_array()[..], &g.stand.to_array()[..]].concat(),
+        }
+    }
+}
+
+/// One rollout from `phase` (fraction of the cycle): (control steps up, ground travel in m).
+fn rollout(s: &Setup, g: &[f32], phase: usize, steps: usize) -> (usize, f32) {
+    rollout_traced(s, g, phase, steps, false, None)
+}
+
+fn rollout_traced(
+    s: &Setup,
+    g: &[f32],
+    phase_index: usize,
+    steps: usize,
+    trace: bool,
+    mut frames: Option<&mut Vec<Image>>,
+) -> (usize, f32) {
+    let Some((_, mut task)) = s.bench.task("train-0001") else {
+        return (0, 0.0);
+    };
+    if s.empty {
+        // EMPTY=1: no furniture, walls and objects far away (the walk's own falls only).
+        task.obstacles.clear();
+        task.room_size = [60.0, 60.0];
+        for o in &mut task.objects {
+            o.pos[0] += 25.0;
+        }
+    }
+    let phase = s.phase(phase_index);
+    let Gains { walk: gains, stand } = s.gains(g);
+    let stop_at = s.stop_after.map(|n| n + 7 * phase_index);
+    let mut hold: Option<StandHold> = None;
+    let mut env = TaskEnv::new(
+        &s.model,
+        &task,
+        &s.bench.catalogue,
+        s.sim.clone(),
+        s.env_config.clone(),
+    );
+    let k0 = (phase * s.reference.len() as f32) as usize;
+    env.start_from_demo(&s.demo, s.reference.clip, s.reference.time(k0));
+    let start = env.world.body_states()[0].pos;
+    let start_yaw = task.start.yaw as f32;
+    let goal = start
+        + 3.0
+            * Vector::new(
+                (start_yaw + s.goal_angle).cos(),
+                (start_yaw + s.goal_angle).sin(),
+                0.0,
+            );
+    let ch = env.world.character.clone();
+    let mut up = 0;
+    let (mut step, mut waited) = (k0, 0);
+    for k in 0..steps {
+        let now = env.world.body_states();
+        let (reference_now, angles) = s.reference.at(step);
+        if hold.is_none()
+            && stop_at.is_some_and(|n| {
+                k >= n + s.stop_wait
+                    || (k >= n + s.stop_min
+                        && if s.stop_on_footfall {
+                            s.reference.footfall(&s.rig, step)
+                        } else {
+                            feet_down(&s.rig, &now, s.stop_height)
+                        })
+            })
+        {
+            hold = Some(StandHold::freeze(&s.model, &s.rig, &now, reference_now));
+            if trace {
+                println!(
+                    "  stop at k {k}: feet down {}, heights {:.3} {:.3}, root h {:.2}",
+                    feet_down(&s.rig, &now, s.stop_height),
+                    now[s.rig.foot[0]].pos.z,
+                    now[s.rig.foot[1]].pos.z,
+                    now[0].pos.z
+                );
+            }
+        }
+        let braking = stop_at.is_some_and(|n| k >= n);
+        let mut targets = match &hold {
+            Some(h) => stand_targets(&s.rig, &stand, &now, h),
+            None if braking => {
+                let mut t =
+                    braking_targets(&s.rig, &gains, &now, reference_now, angles, s.brake_speed);
+                add_brake(&s.rig, &stand, &mut t, &now, reference_now);
+                t
+            }
+            None => braking_targets(&s.rig, &gains, &now, reference_now, angles, s.tempo),
+        };
+        if s.steer_gain != 0.0 && hold.is_none() {
+            let to = HeadingFrame::of(&now[0]).vector(goal - now[0].pos);
+            let err = to.y.atan2(to.x);
+            steer(&s.rig, &mut targets, reference_now, s.steer_gain * err, 0.3);
+        }
+        if trace && k % 3 == 0 && hold.is_some() {
+            let mid = (now[s.rig.foot[0]].pos + now[s.rig.foot[1]].pos) * 0.5;
+            let c = balance_about(&s.rig, &now, mid);
+            let t = c.pelvis.to_scaled_axis();
+            let (y, p, r) = (t.z, t.y, t.x);
+            println!(
+                "  k {k:3} standing h {:.2} d ({:+.2},{:+.2}) v ({:+.2},{:+.2}) pelvis pitch {p:+.2} roll {r:+.2} yaw {y:+.2} feet {:.2} {:.2}",
+                now[0].pos.z, c.d.x, c.d.y, c.v.x, c.v.y,
+                now[s.rig.foot[0]].pos.z, now[s.rig.foot[1]].pos.z,
+            );
+        } else if trace && k % 3 == 0 {
+            let stance = s.rig.stance(reference_now);
+            let c = balance(&s.rig, &now, stance);
+            let r = balance(&s.rig, reference_now, stance);
+            println!(
+                "  k {k:3} stance {stance} h {:.2} dd ({:+.2},{:+.2}) dv ({:+.2},{:+.2}) pos ({:+.2},{:+.2})",
+                now[0].pos.z, c.d.x - r.d.x, c.d.y - r.d.y, c.v.x - r.v.x, c.v.y - r.v.y,
+                now[0].pos.x - start.x, now[0].pos.y - start.y,
+            );
+        }
+        let action: Vec<f32> = targets
+            .iter()
+            .enumerate()
+            .map(|(i, q)| (q - ch.action_offset[i]) / ch.action_scale[i])
+            .collect();
+        step = s
+            .reference
+            .advance(&s.rig, step, &now, &mut waited, s.sync.0, s.sync.1);
+        let result = env.step(&action);
+        if let Some(frames) = frames.as_deref_mut() {
+            if k % 2 == 0 {
+                let camera = Camera::third_person(&env.world, 240, 180);
+                frames.push(render(&env.world, &camera, true));
+            }
+        }
+        // Up: not fallen by the environment's rule, and the root above `UP_HEIGHT` (0.7 m; the
+        // environment's 0.4 m counts a kneeling or sitting character as up, which a search
+        // for standing gains finds at once).
+        if result.fell || result.physics_invalid || env.world.root_height() < s.up_height {
+            break;
+        }
+        up = k + 1;
+    }
+    let end = env.world.body_states()[0].pos;
+    let travel = if s.steer_gain != 0.0 {
+        // Steering: how much closer to the goal.
+        (goal - start).length() - (goal - end).length()
+    } else {
+        ((end.x - start.x).powi(2) + (end.y - start.y).powi(2)).sqrt()
+    };
+    (up, travel)
+}
+
+/// Start phases: `PHASES` (default 8) evenly spaced fractions of the clip (4 overfit the chaotic
+/// rollouts: gains rounded to 3 decimals lost half the steps).
+impl Setup {
+    fn phase(&self, i: usize) -> f32 {
+        (i % self.phases) as f32 / self.phases as f32
+    }
+}
+const STEPS: usize = 300;
+
+/// `ROOMS=n`: one rollout of the environment's own gait (`[env.gait]` with these walking gains,
+/// zero residual actions, steering toward the object) in training task `i` (of the first n),
+/// started at cycle step 7 i toward its first object, as actors and `lhm render-rollout` run it:
+/// (control steps up, 1 if the root came within reach of the object).
+fn rollout_room(s: &Setup, g: &[f32], i: usize, steps: usize) -> (usize, f32) {
+    let Some(task) = s.bench.tasks(lhm_scenes::Split::Train).get(i).cloned() else {
+        return (0, 0.0);
+    };
+    let mut config = s.env_config.clone();
+    config.gait = Some(GaitConfig {
+        gains: s.gains(g).walk,
+        ..GaitConfig::default()
+    });
+    let mut env = TaskEnv::new(&s.model, &task, &s.bench.catalogue, s.sim.clone(), config);
+    let yaw = env.yaw_toward_first_object();
+    env.start_in_gait(&s.demo, s.shared_reference.clone(), 7 * i, yaw);
+    let action = vec![0.0; s.model.dofs.len()];
+    let mut up = 0;
+    for k in 0..steps {
+        let result = env.step(&action);
+        if result.fell || result.physics_invalid || env.world.root_height() < s.up_height {
+            break;
+        }
+        up = k + 1;
+        if result.done {
+            break;
+        }
+    }
+    (up, if env.reached { 1.0 } else { 0.0 })
+}
+
+fn score(s: &Setup, g: &[f32]) -> (f32, usize, f32) {
+    let (mut up, mut travel) = (0, 0.0);
+    for p in 0..s.phases {
+        let (u, t) = if s.rooms {
+            rollout_room(s, g, p, STEPS)
+        } else {
+            rollout(s, g, p, STEPS)
+        };
+        up += u;
+        travel += t;
+    }
+    if s.rooms {
+        // Travel is the count of rooms where the object was reached.
+        return (up as f32 + 100.0 * travel, up, travel);
+    }
+    // Standing still is the goal after a stop: travel counts only in a pure walk search.
+    let w = if s.stop_after.is_some() { 0.0 } else { 30.0 };
+    (up as f32 + w * travel, up, travel)
+}
+
+/// A tiny deterministic generator (xorshift) with Box-Muller normals.
+struct Rng(u64);
+impl Rng {
+    fn uniform(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        ((self.0 >> 40) as f32 + 0.5) / (1u64 << 24) as f32
+    }
+    fn normal(&mut self) -> f32 {
+        let (a, b) = (self.uniform(), self.uniform());
+        (-2.0 * a.ln()).sqrt() * (std::f32::consts::TAU * b).cos()
+    }
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1).peekable();
+    // `gait_probe eval G0,G1,...`: score one set of gains (missing ones 0), print the summary.
+    let eval: Option<String> = if args.peek().map(String::as_str) == Some("eval") {
+        args.next();
+        Some(args.next().unwrap_or_default())
+    } else {
+        None
+    };
+    let iterations: usize = args.next().map(|a| a.parse()).transpose()?.unwrap_or(30);
+    let clip_name = args.next().unwrap_or_else(|| "humanoid3d_walk".into());
+    let home = std::env::var("HOME").unwrap_or_default();
+    let dir = std::path::PathBuf::from(home).join(".cache/lhm/motions");
+    let model = CharacterModel::amp_humanoid();
+    let (env_config, sim) = (EnvConfig::default(), SimConfig::default());
+    let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&env_config, &sim))?;
+    let clip = demo
+        .clips()
+        .position(|(n, _)| n.contains(&clip_name))
+        .ok_or("clip not installed")?;
+    let tempo = std::env::var("TEMPO")
+        .ok()
+        .and_then(|v| v.parse::<f32>().ok())
+        .unwrap_or(1.0);
+    let reference =
+        GaitReference::new(&model, &demo, clip, tempo / sim.control_hz).ok_or("clip too short")?;
+    let env_f32 = |k: &str, d: f32| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let shared_reference = std::sync::Arc::new(reference.clone());
+    let setup = Setup {
+        rig: Rig::new(&model).ok_or("not the AMP humanoid")?,
+        model,
+        demo,
+        reference,
+        bench: Benchmark::embedded()?,
+        sim,
+        env_config,
+        goal_angle: env_f32("GOAL_ANGLE", 0.0),
+        steer_gain: env_f32("STEER", 0.0),
+        sync: (
+            env_f32("SYNC_WAIT", 0.0) as usize,
+            env_f32("SYNC_SKIP", 0.0) as usize,
+        ),
+        stop_after: std::env::var("STOP_AFTER")
+            .ok()
+            .and_then(|v| v.parse().ok()),
+        stop_wait: env_f32("STOP_WAIT", 10.0) as usize,
+        search: match std::env::var("SEARCH").as_deref() {
+            Ok("stand") => Search::Stand,
+            Ok("both") => Search::Both,
+            _ => Search::Walk,
+        },
+        fixed: Gains {
+            walk: BalanceGains::default(),
+            stand: StandGains::default(),
+        },
+        empty: std::env::var_os("EMPTY").is_some(),
+        stop_on_footfall: std::env::var("STOP_ON").as_deref() == Ok("footfall"),
+        stop_height: env_f32("STOP_HEIGHT", 0.07),
+        brake_speed: env_f32("BRAKE_SPEED", 1.0),
+        stop_min: env_f32("STOP_MIN", 0.0) as usize,
+        up_height: env_f32("UP_HEIGHT", 0.7),
+        tempo: env_f32("TEMPO", 1.0),
+        phases: env_f32("PHASES", 8.0).max(1.0) as usize,
+        rooms: std::env::var_os("ROOMS").is_some(),
+        shared_reference,
+    };
+    // A comma list in the search vector's order (missing entries 0), or "default".
+    let parse = |text: &str| -> Result<Vec<f32>, std::num::ParseFloatError> {
+        let mut v = vec![0f32; setup.dim()];
+        if text == "default" {
+            return Ok(setup.vector(&setup.fixed));
+        }
+        for (x, t) in v.iter_mut().zip(text.split(',').filter(|t| !t.is_empty())) {
+            *x = t.parse()?;
+        }
+        Ok(v)
+    };
+    if let Some(text) = eval {
+        let g = parse(&text)?;
+        let (total, _, _) = score(&setup, &g);
+        for p in (0..setup.phases).filter(|_| setup.rooms) {
+            let (u, r) = rollout_room(&setup, &g, p, STEPS);
+            println!("room {p}: up {u}, reached {r}");
+        }
+        for p in (0..setup.phases).filter(|_| !setup.rooms) {
+            let (u, t) = rollout_traced(
+                &setup,
+                &g,
+                p,
+                STEPS,
+                std::env::var_os("TRACE").is_some(),
+                None,
+            );
+            println!("phase {}: up {u}, travel {t:.2}", setup.phase(p));
+        }
+        println!("score {total:.1}");
+        // GIF=PATH: the rollout from the phase in $GIF_PHASE (default 0.5), every other step.
+        if let Ok(path) = std::env::var("GIF") {
+            let phase = (env_f32("GIF_PHASE", 0.5) * setup.phases as f32) as usize;
+            let mut frames = Vec::new();
+            rollout_traced(&setup, &g, phase, STEPS, false, Some(&mut frames));
+            write_gif(&frames, 7, std::fs::File::create(path)?)?;
+        }
+        return Ok(());
+    }
+    let mut mean = parse(&std::env::var("START").unwrap_or_default())?;
+    let mut sigma: f32 = std::env::var("SIGMA")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.2);
+    let elitist = std::env::var_os("ELITIST").is_some();
+    let (base, up, travel) = score(&setup, &mean);
+    println!(
+        "start point (zeros: open loop): score {base:.1}, steps up {up} of {}, travel {travel:.2} m",
+        setup.phases * STEPS
+    );
+    let mut best = (base, mean.clone());
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let lambda = 16;
+    let mut mean_score = base;
+    for it in 0..iterations {
+        let candidates: Vec<Vec<f32>> = (0..lambda)
+            .map(|_| {
+                let mut c = mean.clone();
+                for x in &mut c {
+                    *x += sigma * rng.normal();
+                }
+                c
+            })
+            .collect();
+        let scores: Vec<(f32, usize, f32)> = std::thread::scope(|scope| {
+            let halves: Vec<_> = candidates
+                .chunks(lambda / 2)
+                .map(|chunk| {
+                    let setup = &setup;
+                    scope.spawn(move || chunk.iter().map(|c| score(setup, c)).collect::<Vec<_>>())
+                })
+                .collect();
+            halves
+                .into_iter()
+                .flat_map(|h| h.join().unwrap_or_default())
+                .collect()
+        });
+        let mut order: Vec<usize> = (0..lambda).collect();
+        order.sort_by(|&a, &b| scores[b].0.total_cmp(&scores[a].0));
+        let mu = lambda / 2;
+        let mut next = vec![0f32; setup.dim()];
+        for &i in &order[..mu] {
+            for (n, c) in next.iter_mut().zip(&candidates[i]) {
+                *n += c / mu as f32;
+            }
+        }
+        mean = next;
+        let top = order[0];
+        if scores[top].0 > best.0 {
+            best = (scores[top].0, candidates[top].clone());
+            let all: Vec<String> = best.1.iter().map(|g| g.to_string()).collect();
+            println!("new best {:.1}: {}", best.0, all.join(","));
+        }
+        if elitist {
+            // (1+λ): sample around the best so far at a fixed step size.
+            mean = best.1.clone();
+        } else {
+            // Step size: grow while the batch's best beats the previous mean, shrink otherwise.
+            sigma = (sigma
+                * if scores[top].0 > mean_score {
+                    1.05
+                } else {
+                    0.9
+                })
+            .clamp(0.02, 1.0);
+            mean_score = score(&setup, &mean).0;
+        }
+        println!(
+            "it {it}: best of batch {:.1} (up {}, travel {:.2} m), best so far {:.1}, sigma {sigma:.3}",
+            scores[top].0, scores[top].1, scores[top].2, best.0
+        );
+    }
+    println!("best gains (score {:.1}):", best.0);
+    let names: Vec<&str> = match setup.search {
+        Search::Walk => BalanceGains::NAMES.to_vec(),
+        Search::Stand => StandGains::NAMES.to_vec(),
+        Search::Both => [&BalanceGains::NAMES[..], &StandGains::NAMES[..]].concat(),
+    };
+    for (n, g) in names.iter().zip(&best.1) {
+        println!("  {n} = {g:.3}");
+    }
+    for p in 0..setup.phases {
+        println!("trace from phase {}:", setup.phase(p));
+        let (u, t) = rollout_traced(&setup, &best.1, p, STEPS, true, None);
+        println!("  up {u}, travel {t:.2}");
+    }
+    let (_, up, travel) = score(&setup, &best.1);
+    println!(
+        "best: steps up {up} of {}, travel {travel:.2} m",
+        setup.phases * STEPS
+    );
+    Ok(())
+}
