@@ -27,7 +27,10 @@
 //! reference's velocity times `BRAKE_SPEED`, then, once both feet are below `STOP_HEIGHT`
 //! (after at least `STOP_MIN`, at most `STOP_WAIT` steps; `STOP_ON=footfall`: at the
 //! reference's footfall), the pose held with ankle and hip strategies; `SEARCH=stand` (or
-//! `both`) searches the stop's gains instead of (or with) the walk's.
+//! `both`) searches the stop's gains instead of (or with) the walk's. `STAND_START=1`: the
+//! rollouts start from the task's standing start (at rest) instead of the clip's state.
+//! `gait_probe push`: the neutral standing pose (zero action) with every body moving at
+//! 0.1-1.0 m/s forward or sideways — how much momentum standing alone absorbs.
 
 use lhm_scenes::Benchmark;
 use lhm_sim::env::{EnvConfig, GaitConfig, TaskEnv};
@@ -36,6 +39,7 @@ use lhm_sim::gait::{
 };
 mod stop;
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::motion::retarget::KinematicPose;
 use lhm_sim::obs::HeadingFrame;
 use lhm_sim::render::{render, write_gif, Camera, Image};
 use lhm_sim::{CharacterModel, SimConfig};
@@ -81,6 +85,7 @@ struct Setup {
     phases: usize,
     /// `ROOMS=1`: each "phase" is a training task instead (`rollout_room`).
     rooms: bool,
+    stand_start: bool,
     shared_reference: std::sync::Arc<GaitReference>,
 }
 
@@ -166,7 +171,12 @@ fn rollout_traced(
         s.env_config.clone(),
     );
     let k0 = (phase * s.reference.len() as f32) as usize;
-    env.start_from_demo(&s.demo, s.reference.clip, s.reference.time(k0));
+    if s.stand_start {
+        // STAND_START=1: the task's own standing start (neutral pose, at rest) instead of the
+        // clip's state; the gait's feedback starts from there at the cycle step.
+    } else {
+        env.start_from_demo(&s.demo, s.reference.clip, s.reference.time(k0));
+    }
     let start = env.world.body_states()[0].pos;
     let start_yaw = task.start.yaw as f32;
     let goal = start
@@ -313,6 +323,42 @@ fn rollout_room(s: &Setup, g: &[f32], i: usize, steps: usize) -> (usize, f32) {
     (up, if env.reached { 1.0 } else { 0.0 })
 }
 
+/// `push V`: the neutral standing pose (zero action) at task train-0001's start, every body
+/// moving at V m/s along the heading: how much momentum standing alone absorbs (steps up of 300).
+fn push(s: &Setup, v: f32, lateral: bool) -> usize {
+    let Some((_, task)) = s.bench.task("train-0001") else {
+        return 0;
+    };
+    let mut env = TaskEnv::new(
+        &s.model,
+        &task,
+        &s.bench.catalogue,
+        s.sim.clone(),
+        s.env_config.clone(),
+    );
+    let mut states = env.world.body_states();
+    let heading = states[0].rot * if lateral { Vector::Y } else { Vector::X };
+    let dir = Vector::new(heading.x, heading.y, 0.0).normalize_or_zero();
+    for b in &mut states {
+        b.linvel = dir * v;
+        b.angvel = Vector::ZERO;
+    }
+    let pose = KinematicPose {
+        root_pos: states[0].pos,
+        root_rot: states[0].rot,
+        local_rots: vec![rapier3d::math::Rotation::IDENTITY; s.model.bodies.len()],
+    };
+    env.world.set_character_state(&pose, &states);
+    let action = vec![0.0; s.model.dofs.len()];
+    for k in 0..STEPS {
+        let r = env.step(&action);
+        if r.fell || r.physics_invalid || env.world.root_height() < s.up_height {
+            return k;
+        }
+    }
+    STEPS
+}
+
 fn score(s: &Setup, g: &[f32]) -> (f32, usize, f32) {
     let (mut up, mut travel) = (0, 0.0);
     for p in 0..s.phases {
@@ -351,6 +397,10 @@ impl Rng {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1).peekable();
     // `gait_probe eval G0,G1,...`: score one set of gains (missing ones 0), print the summary.
+    let push_mode = args.peek().map(String::as_str) == Some("push");
+    if push_mode {
+        args.next();
+    }
     let eval: Option<String> = if args.peek().map(String::as_str) == Some("eval") {
         args.next();
         Some(args.next().unwrap_or_default())
@@ -417,8 +467,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         tempo: env_f32("TEMPO", 1.0),
         phases: env_f32("PHASES", 8.0).max(1.0) as usize,
         rooms: std::env::var_os("ROOMS").is_some(),
+        stand_start: std::env::var_os("STAND_START").is_some(),
         shared_reference,
     };
+    if push_mode {
+        for v in [0.0f32, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0] {
+            println!(
+                "push {v:.1} m/s: forward up {} of {STEPS}, lateral up {} of {STEPS}",
+                push(&setup, v, false),
+                push(&setup, v, true)
+            );
+        }
+        return Ok(());
+    }
     // A comma list in the search vector's order (missing entries 0), or "default".
     let parse = |text: &str| -> Result<Vec<f32>, std::num::ParseFloatError> {
         let mut v = vec![0f32; setup.dim()];
