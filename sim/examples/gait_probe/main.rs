@@ -152,12 +152,7 @@ fn rollout_traced(
         return (0, 0.0);
     };
     if s.empty {
-        // EMPTY=1: no furniture, walls and objects far away (the walk's own falls only).
-        task.obstacles.clear();
-        task.room_size = [60.0, 60.0];
-        for o in &mut task.objects {
-            o.pos[0] += 25.0;
-        }
+        empty_room(&mut task);
     }
     let phase = s.phase(phase_index);
     let Gains { walk: gains, stand } = s.gains(g);
@@ -323,12 +318,23 @@ fn rollout_room(s: &Setup, g: &[f32], i: usize, steps: usize) -> (usize, f32) {
     (up, if env.reached { 1.0 } else { 0.0 })
 }
 
-/// `push V`: the neutral standing pose (zero action) at task train-0001's start, every body
+/// EMPTY=1: no furniture, walls and objects far away (the character's own falls only).
+fn empty_room(task: &mut lhm_scenes::Task) {
+    task.obstacles.clear();
+    task.room_size = [60.0, 60.0];
+    for o in &mut task.objects {
+        o.pos[0] += 25.0;
+    }
+}
+
+/// `push V`: the neutral standing pose (zero action) at task train-0001's start (room emptied), every body
 /// moving at V m/s along the heading: how much momentum standing alone absorbs (steps up of 300).
 fn push(s: &Setup, v: f32, lateral: bool) -> usize {
-    let Some((_, task)) = s.bench.task("train-0001") else {
+    let Some((_, mut task)) = s.bench.task("train-0001") else {
         return 0;
     };
+    // Always in the empty room: a push toward furniture ends leaning on it.
+    empty_room(&mut task);
     let mut env = TaskEnv::new(
         &s.model,
         &task,
@@ -349,9 +355,26 @@ fn push(s: &Setup, v: f32, lateral: bool) -> usize {
         local_rots: vec![rapier3d::math::Rotation::IDENTITY; s.model.bodies.len()],
     };
     env.world.set_character_state(&pose, &states);
+    if std::env::var_os("TRACE").is_some() {
+        let b = env.world.body_states();
+        println!(
+            "  after the push: root velocity {:?}, feet {:?} {:?}",
+            b[0].linvel, b[s.rig.foot[0]].linvel, b[s.rig.foot[1]].linvel
+        );
+    }
     let action = vec![0.0; s.model.dofs.len()];
+    let start = env.world.body_states()[0].pos;
     for k in 0..STEPS {
         let r = env.step(&action);
+        if std::env::var_os("TRACE").is_some() && k % 15 == 0 {
+            let b = env.world.body_states();
+            println!(
+                "  k {k}: root moved {:.2} m, height {:.2}, speed {:.2}",
+                (b[0].pos - start).length(),
+                b[0].pos.z,
+                b[0].linvel.length()
+            );
+        }
         if r.fell || r.physics_invalid || env.world.root_height() < s.up_height {
             return k;
         }
