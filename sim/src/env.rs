@@ -94,6 +94,9 @@ pub struct GaitConfig {
     /// walking: its targets become the neutral standing pose (zero joint angles) for the rest of
     /// the episode, and the phase reads as zeros. 0: never stop.
     pub stop_distance: f32,
+    /// Starts this far (m, horizontally) before the first object, heading at it, instead of at
+    /// the task's start: episodes about the stop alone. 0: the task's start.
+    pub start_distance: f32,
     pub gains: BalanceGains,
 }
 
@@ -107,6 +110,7 @@ impl Default for GaitConfig {
             steer_gain: 0.1,
             steer_max: 0.2,
             stop_distance: 0.0,
+            start_distance: 0.0,
             gains: BalanceGains::default(),
         }
     }
@@ -331,6 +335,20 @@ impl TaskEnv {
     /// [`Self::start_from_demo`] with the clip's root heading turned to `yaw` instead of the
     /// task's start yaw.
     pub fn start_from_demo_heading(&mut self, demo: &DemoMotion, clip: usize, t: f32, yaw: f32) {
+        let at = [self.task.start.pos[0] as f32, self.task.start.pos[1] as f32];
+        self.start_from_demo_at(demo, clip, t, at, yaw);
+    }
+
+    /// [`Self::start_from_demo_heading`] with the root placed over `at` (x, y) instead of the
+    /// task's start position.
+    pub fn start_from_demo_at(
+        &mut self,
+        demo: &DemoMotion,
+        clip: usize,
+        t: f32,
+        at: [f32; 2],
+        yaw: f32,
+    ) {
         let (states, prev) = demo.start_states(clip, t);
         let Some(root) = states.first() else { return };
         let pose = demo.pose_at(clip, t);
@@ -340,11 +358,7 @@ impl TaskEnv {
             f.y.atan2(f.x)
         };
         let turn = Rotation::from_rotation_z(yaw - clip_yaw);
-        let start = Vector::new(
-            self.task.start.pos[0] as f32,
-            self.task.start.pos[1] as f32,
-            0.0,
-        );
+        let start = Vector::new(at[0], at[1], 0.0);
         let origin = Vector::new(root.pos.x, root.pos.y, 0.0);
         let place = |p: Vector| start + turn * (p - origin);
         let moved = |b: &BodyState| BodyState {
@@ -392,8 +406,8 @@ impl TaskEnv {
     }
 
     /// A start in the gait: the character as the gait's clip is at cycle step `step`, placed at
-    /// the task's start and turned to `yaw`, and the gait running from there
-    /// ([`Self::start_from_demo_heading`] + [`Self::start_gait`]). `reference` must be a cycle
+    /// the task's start (or `[env.gait] start_distance` before the first object) and turned to
+    /// `yaw`, and the gait running from there ([`Self::start_from_demo_at`] + [`Self::start_gait`]). `reference` must be a cycle
     /// of `demo`'s clips ([`crate::gait::reference_for`]).
     pub fn start_in_gait(
         &mut self,
@@ -402,10 +416,19 @@ impl TaskEnv {
         step: usize,
         yaw: f32,
     ) -> bool {
-        if self.config.gait.is_none() || self.rig.is_none() {
+        let Some(config) = self.config.gait.as_ref().filter(|_| self.rig.is_some()) else {
             return false;
+        };
+        let mut at = [self.task.start.pos[0] as f32, self.task.start.pos[1] as f32];
+        let object = self.pair(0).and_then(|(i, _, _)| self.task.objects.get(i));
+        if let (Some(o), true) = (object, config.start_distance > 0.0) {
+            // `start_distance` before the first object, on the line the heading points along.
+            at = [
+                o.pos[0] as f32 - config.start_distance * yaw.cos(),
+                o.pos[1] as f32 - config.start_distance * yaw.sin(),
+            ];
         }
-        self.start_from_demo_heading(demo, reference.clip, reference.time(step), yaw);
+        self.start_from_demo_at(demo, reference.clip, reference.time(step), at, yaw);
         self.start_gait(reference, step)
     }
 

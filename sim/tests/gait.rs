@@ -276,6 +276,39 @@ fn within_the_stop_distance_the_base_stands_and_the_phase_reads_zero() {
     assert!(after < before - 0.1, "hip {before} -> {after}");
 }
 
+#[test]
+fn a_start_distance_starts_the_gait_that_far_before_the_first_object_heading_at_it() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let gait = GaitConfig {
+        start_distance: 1.5,
+        ..GaitConfig::default()
+    };
+    let mut env = gait_env(&model, Some(gait));
+    let first = &env.task.sequence[0].object;
+    let o = env.task.objects.iter().find(|o| &o.id == first).unwrap();
+    let object = Vector::new(o.pos[0] as f32, o.pos[1] as f32, 0.0);
+    let task_start = Vector::new(
+        env.task.start.pos[0] as f32,
+        env.task.start.pos[1] as f32,
+        0.0,
+    );
+    let yaw = env.yaw_toward_first_object() + 0.2;
+    assert!(env.start_in_gait(&demo, reference, 0, yaw));
+    let root = env.world.body_states()[0];
+    let to = Vector::new(object.x - root.pos.x, object.y - root.pos.y, 0.0);
+    // The synthetic clip's root is over its own origin at step 0.
+    assert!((to.length() - 1.5).abs() < 0.02, "{}", to.length());
+    assert!((to.y.atan2(to.x) - yaw).abs() < 0.02);
+    let forward = root.rot * Vector::X;
+    assert!((forward.y.atan2(forward.x) - yaw).abs() < 0.02);
+    assert!(
+        (root.pos - task_start).length() > 0.1,
+        "not the task's start"
+    );
+}
+
 /// `cycle_clip` with the swinging leg's knee bent, so the feet take turns being lower.
 fn stepping_demo(model: &CharacterModel) -> DemoMotion {
     let (rs, ls) = (
