@@ -321,7 +321,7 @@ impl TaskEnv {
     /// The yaw (radians about +z) from the task's start position toward the first pair's
     /// object, or the start yaw when the task has no pair.
     pub fn yaw_toward_first_object(&self) -> f32 {
-        let Some(o) = self.pair(0).and_then(|(i, _, _)| self.task.objects.get(i)) else {
+        let Some(o) = self.first_object() else {
             return self.task.start.yaw as f32;
         };
         let dx = o.pos[0] - self.task.start.pos[0];
@@ -330,6 +330,11 @@ impl TaskEnv {
             return self.task.start.yaw as f32;
         }
         dy.atan2(dx) as f32
+    }
+
+    /// The first pair's object as the task places it.
+    fn first_object(&self) -> Option<&lhm_scenes::MovableObject> {
+        self.pair(0).and_then(|(i, _, _)| self.task.objects.get(i))
     }
 
     /// [`Self::start_from_demo`] with the clip's root heading turned to `yaw` instead of the
@@ -407,8 +412,9 @@ impl TaskEnv {
 
     /// A start in the gait: the character as the gait's clip is at cycle step `step`, placed at
     /// the task's start (or `[env.gait] start_distance` before the first object) and turned to
-    /// `yaw`, and the gait running from there ([`Self::start_from_demo_at`] + [`Self::start_gait`]). `reference` must be a cycle
-    /// of `demo`'s clips ([`crate::gait::reference_for`]).
+    /// `yaw`, and the gait running from there ([`Self::start_from_demo_at`] +
+    /// [`Self::start_gait`]). `reference` must be a cycle of `demo`'s clips
+    /// ([`crate::gait::reference_for`]).
     pub fn start_in_gait(
         &mut self,
         demo: &DemoMotion,
@@ -420,8 +426,7 @@ impl TaskEnv {
             return false;
         };
         let mut at = [self.task.start.pos[0] as f32, self.task.start.pos[1] as f32];
-        let object = self.pair(0).and_then(|(i, _, _)| self.task.objects.get(i));
-        if let (Some(o), true) = (object, config.start_distance > 0.0) {
+        if let (Some(o), true) = (self.first_object(), config.start_distance > 0.0) {
             // `start_distance` before the first object, on the line the heading points along.
             at = [
                 o.pos[0] as f32 - config.start_distance * yaw.cos(),

@@ -148,32 +148,21 @@ fn rollout_traced(
     trace: bool,
     mut frames: Option<&mut Vec<Image>>,
 ) -> (usize, f32) {
-    let Some((_, mut task)) = s.bench.task("train-0001") else {
+    let Some(mut env) = probe_env(s, s.empty) else {
         return (0, 0.0);
     };
-    if s.empty {
-        empty_room(&mut task);
-    }
     let phase = s.phase(phase_index);
     let Gains { walk: gains, stand } = s.gains(g);
     let stop_at = s.stop_after.map(|n| n + 7 * phase_index);
     let mut hold: Option<StandHold> = None;
-    let mut env = TaskEnv::new(
-        &s.model,
-        &task,
-        &s.bench.catalogue,
-        s.sim.clone(),
-        s.env_config.clone(),
-    );
     let k0 = (phase * s.reference.len() as f32) as usize;
-    if s.stand_start {
-        // STAND_START=1: the task's own standing start (neutral pose, at rest) instead of the
-        // clip's state; the gait's feedback starts from there at the cycle step.
-    } else {
+    // STAND_START=1 keeps the task's own standing start (neutral pose, at rest) instead of the
+    // clip's state; the gait's feedback starts from there at the cycle step.
+    if !s.stand_start {
         env.start_from_demo(&s.demo, s.reference.clip, s.reference.time(k0));
     }
     let start = env.world.body_states()[0].pos;
-    let start_yaw = task.start.yaw as f32;
+    let start_yaw = env.task.start.yaw as f32;
     let goal = start
         + 3.0
             * Vector::new(
@@ -260,10 +249,7 @@ fn rollout_traced(
                 frames.push(render(&env.world, &camera, true));
             }
         }
-        // Up: not fallen by the environment's rule, and the root above `UP_HEIGHT` (0.7 m; the
-        // environment's 0.4 m counts a kneeling or sitting character as up, which a search
-        // for standing gains finds at once).
-        if result.fell || result.physics_invalid || env.world.root_height() < s.up_height {
+        if down(s, &env, &result) {
             break;
         }
         up = k + 1;
@@ -307,7 +293,7 @@ fn rollout_room(s: &Setup, g: &[f32], i: usize, steps: usize) -> (usize, f32) {
     let mut up = 0;
     for k in 0..steps {
         let result = env.step(&action);
-        if result.fell || result.physics_invalid || env.world.root_height() < s.up_height {
+        if down(s, &env, &result) {
             break;
         }
         up = k + 1;
@@ -327,21 +313,34 @@ fn empty_room(task: &mut lhm_scenes::Task) {
     }
 }
 
-/// `push V`: the neutral standing pose (zero action) at task train-0001's start (room emptied), every body
-/// moving at V m/s along the heading: how much momentum standing alone absorbs (steps up of 300).
-fn push(s: &Setup, v: f32, lateral: bool) -> usize {
-    let Some((_, mut task)) = s.bench.task("train-0001") else {
-        return 0;
-    };
-    // Always in the empty room: a push toward furniture ends leaning on it.
-    empty_room(&mut task);
-    let mut env = TaskEnv::new(
+/// The probe's environment: task train-0001 (`empty`: emptied), the default configuration.
+fn probe_env(s: &Setup, empty: bool) -> Option<TaskEnv> {
+    let (_, mut task) = s.bench.task("train-0001")?;
+    if empty {
+        empty_room(&mut task);
+    }
+    Some(TaskEnv::new(
         &s.model,
         &task,
         &s.bench.catalogue,
         s.sim.clone(),
         s.env_config.clone(),
-    );
+    ))
+}
+
+/// Whether a rollout is over: the environment calls it a fall (or the physics broke), or the root
+/// is below `UP_HEIGHT` (the environment's 0.4 m lets a crouched character go on).
+fn down(s: &Setup, env: &TaskEnv, result: &lhm_sim::env::StepResult) -> bool {
+    result.fell || result.physics_invalid || env.world.root_height() < s.up_height
+}
+
+/// `push V`: the neutral standing pose (zero action) at task train-0001's start (room emptied), every body
+/// moving at V m/s along the heading: how much momentum standing alone absorbs (steps up of 300).
+fn push(s: &Setup, v: f32, lateral: bool) -> usize {
+    // Always in the empty room: a push toward furniture ends leaning on it.
+    let Some(mut env) = probe_env(s, true) else {
+        return 0;
+    };
     let mut states = env.world.body_states();
     let heading = states[0].rot * if lateral { Vector::Y } else { Vector::X };
     let dir = Vector::new(heading.x, heading.y, 0.0).normalize_or_zero();
@@ -375,7 +374,7 @@ fn push(s: &Setup, v: f32, lateral: bool) -> usize {
                 b[0].linvel.length()
             );
         }
-        if r.fell || r.physics_invalid || env.world.root_height() < s.up_height {
+        if down(s, &env, &r) {
             return k;
         }
     }
