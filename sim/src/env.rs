@@ -437,6 +437,11 @@ impl TaskEnv {
         self.start_gait(reference, step)
     }
 
+    /// Whether a gait runs this episode (walking or stopped).
+    pub fn gait_running(&self) -> bool {
+        self.gait.is_some()
+    }
+
     /// The gait's phase in its cycle, [0, 1), while one runs and walks.
     pub fn gait_phase(&self) -> Option<f32> {
         self.gait

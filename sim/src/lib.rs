@@ -10,6 +10,7 @@ pub mod gait;
 pub mod mjcf;
 pub mod motion;
 pub mod obs;
+pub mod plan;
 pub mod render;
 pub mod room;
 pub mod task;
