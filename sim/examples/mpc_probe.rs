@@ -45,6 +45,8 @@ struct Outcome {
     reached: bool,
     stopped: bool,
     end_speed: f32,
+    /// Root mean square of the executed actions (the residual's size).
+    action_rms: f32,
 }
 
 struct Problem<'a> {
@@ -97,8 +99,11 @@ impl Problem<'_> {
             self.model.dofs.len(),
         )?;
         let mut up = 0;
+        let (mut sq, mut n) = (0.0f32, 0usize);
         for t in 0..steps {
             let action = planner.act(&env, &mut workers);
+            sq += action.iter().map(|a| a * a).sum::<f32>();
+            n += action.len();
             let r = env.step(&action);
             if let Some(frames) = frames.as_deref_mut() {
                 if t % 2 == 0 {
@@ -119,6 +124,7 @@ impl Problem<'_> {
             reached: env.reached,
             stopped: stopping(&env),
             end_speed: horizontal_speed(&env),
+            action_rms: (sq / n.max(1) as f32).sqrt(),
         })
     }
 }
@@ -138,6 +144,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         speed_cost: var("SPEED_COST", d.speed_cost),
         effort_cost: var("EFFORT_COST", d.effort_cost),
         up_height: var("UP_HEIGHT", d.up_height),
+        decay: var("DECAY", d.decay),
+        temperature: var("TEMPERATURE", d.temperature),
         seed: d.seed,
     };
     planner.check()?;
@@ -206,12 +214,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         reached += out.reached as usize;
         stood += (out.up == steps) as usize;
         println!(
-            "{}: up {} of {steps}, reached {}, stopped {}, end speed {:.2} m/s, {:.1} s",
+            "{}: up {} of {steps}, reached {}, stopped {}, end speed {:.2} m/s, action rms {:.2}, {:.1} s",
             task.id,
             out.up,
             out.reached,
             out.stopped,
             out.end_speed,
+            out.action_rms,
             clock.elapsed().as_secs_f32()
         );
     }

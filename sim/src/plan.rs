@@ -32,6 +32,14 @@ pub struct PlannerConfig {
     /// A rollout whose root goes below this height (m) counts as fallen; the environment's own
     /// rule (0.4 m) lets a crouched character go on.
     pub up_height: f32,
+    /// The warm start is multiplied by this at every step (1: plain predictive sampling; below 1
+    /// the plan is pulled back toward zero, i.e. toward the base the actions are residuals on,
+    /// instead of random-walking as the selected noise accumulates).
+    pub decay: f32,
+    /// 0: the cheapest plan becomes the nominal (predictive sampling). Above 0: the nominal is
+    /// the plans' mean weighted by exp(−(cost − cheapest) / temperature) (MPPI, Williams et al.
+    /// 2016), which averages the selected noise away.
+    pub temperature: f32,
     /// Threads rolling plans out (each with its own copy of the environment).
     pub threads: usize,
     pub seed: u64,
@@ -50,6 +58,8 @@ impl Default for PlannerConfig {
             speed_cost: 2.0,
             effort_cost: 0.01,
             up_height: 0.7,
+            decay: 1.0,
+            temperature: 0.0,
             threads: 2,
             seed: 0x5eed,
         }
@@ -62,6 +72,18 @@ impl PlannerConfig {
             return Err(format!(
                 "planner: samples ({}), horizon ({}), knot ({}) and threads ({}) must be positive",
                 self.samples, self.horizon, self.knot, self.threads
+            ));
+        }
+        if !(self.decay.is_finite() && (0.0..=1.0).contains(&self.decay)) {
+            return Err(format!(
+                "planner.decay must be within [0, 1], got {}",
+                self.decay
+            ));
+        }
+        if !(self.temperature.is_finite() && self.temperature >= 0.0) {
+            return Err(format!(
+                "planner.temperature must be finite and >= 0, got {}",
+                self.temperature
             ));
         }
         if !(self.sigma.is_finite() && self.sigma >= 0.0) {
@@ -155,7 +177,24 @@ impl Planner {
         let best = (0..costs.len())
             .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
             .unwrap_or(0);
-        self.nominal = candidates.swap_remove(best);
+        let t = self.config.temperature;
+        if t > 0.0 && costs[best].is_finite() {
+            let weights: Vec<f32> = costs
+                .iter()
+                .map(|c| (-(c - costs[best]) / t).exp())
+                .map(|w| if w.is_finite() { w } else { 0.0 })
+                .collect();
+            let total: f32 = weights.iter().sum();
+            let mut mean = vec![0.0f32; self.nominal.len()];
+            for (plan, w) in candidates.iter().zip(&weights) {
+                for (m, x) in mean.iter_mut().zip(plan) {
+                    *m += w / total * x;
+                }
+            }
+            self.nominal = mean;
+        } else {
+            self.nominal = candidates.swap_remove(best);
+        }
         let action = self.nominal[..self.act_dim].to_vec();
         // Shift a step; the last action is held.
         self.nominal.drain(..self.act_dim);
@@ -164,6 +203,9 @@ impl Planner {
             self.nominal.extend(last);
         } else {
             self.nominal.extend(std::iter::repeat_n(0.0, self.act_dim));
+        }
+        for x in &mut self.nominal {
+            *x *= self.config.decay;
         }
         action
     }

@@ -1,0 +1,274 @@
+//! Experiment: distil the predictive-sampling planner (`lhm_sim::plan`), which keeps the gait base
+//! up and stops it at the object, into Teacher 1's policy network by DAgger (Ross, Gordon, Bagnell
+//! 2011; guided policy search, Levine & Koltun 2013): each round rolls episodes out on training
+//! tasks with the planner's action (probability β) or the student's mean action, labels every
+//! visited state with the planner's action, aggregates, and regresses the student's mean onto all
+//! labels so far (`lhm_learner::dagger`). After each round the student alone (deterministic) is
+//! scored on unseen tasks: control steps up, objects reached, episodes up to the end — against
+//! the gait base alone. The student is saved as a `lhm train` policy checkpoint with the run's
+//! config, so `lhm render-rollout --policy OUT/policy --config OUT/config.toml` plays it and
+//! `lhm train --init-from OUT/policy` fine-tunes it.
+//!
+//! `cargo run --release -p lhm-cli --example mpc_distill -- --config FILE --out DIR`
+//! (the config must have `[env.gait]`; the planner's settings are `PlannerConfig::default()` but
+//! for `--samples`/`--horizon`).
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Parser;
+use lhm_learner::dagger::{DaggerDataset, StudentConfig, StudentTrainer};
+use lhm_learner::service::TrainConfig;
+use lhm_learner::state::Learner;
+use lhm_nets::SplitMix64;
+use lhm_scenes::{Benchmark, Split, Task};
+use lhm_sim::env::TaskEnv;
+use lhm_sim::gait::{reference_for, GaitReference};
+use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::plan::{down, Planner, PlannerConfig};
+use lhm_sim::CharacterModel;
+
+#[derive(Parser, Debug)]
+struct Args {
+    /// A `lhm train` config with `[env.gait]`.
+    #[arg(long)]
+    config: PathBuf,
+    /// Output directory: the aggregated dataset, the student's policy checkpoint, config.toml.
+    #[arg(long)]
+    out: PathBuf,
+    #[arg(long, default_value_t = 6)]
+    rounds: usize,
+    /// Episodes per round (on training tasks, drawn in order from a shuffled list).
+    #[arg(long, default_value_t = 6)]
+    episodes: usize,
+    /// Control steps per collection episode.
+    #[arg(long, default_value_t = 300)]
+    episode_steps: usize,
+    /// β of round r is beta^r (round 0: the planner alone).
+    #[arg(long, default_value_t = 0.5)]
+    beta: f64,
+    /// Fraction of collection episodes started from the task's standing start (the rest in the
+    /// gait at a random cycle step, as the actors start them).
+    #[arg(long, default_value_t = 0.5)]
+    stand_start: f64,
+    #[arg(long, default_value_t = 24)]
+    samples: usize,
+    #[arg(long, default_value_t = 30)]
+    horizon: usize,
+    /// Unseen tasks the student is scored on after each round.
+    #[arg(long, default_value_t = 10)]
+    eval_tasks: usize,
+    #[arg(long, default_value_t = 600)]
+    eval_steps: usize,
+    /// Regression passes per round, in multiples of the newest round's rows.
+    #[arg(long, default_value_t = 8)]
+    epochs: usize,
+    #[arg(long, default_value_t = 1e-3)]
+    lr: f64,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+struct Setup {
+    model: CharacterModel,
+    bench: Benchmark,
+    demo: DemoMotion,
+    reference: Arc<GaitReference>,
+    train: TrainConfig,
+}
+
+impl Setup {
+    fn env(&self, task: &Task) -> TaskEnv {
+        TaskEnv::new(
+            &self.model,
+            task,
+            &self.bench.catalogue,
+            self.train.sim.clone(),
+            self.train.env.clone(),
+        )
+    }
+
+    /// A fresh episode: standing at the task's start with the gait from cycle step 0, or in the
+    /// gait at `step`, turned toward the first object.
+    fn start(&self, task: &Task, stand: bool, step: usize) -> TaskEnv {
+        let mut env = self.env(task);
+        if stand {
+            env.start_gait(Arc::clone(&self.reference), 0);
+        } else {
+            let yaw = env.yaw_toward_first_object();
+            env.start_in_gait(&self.demo, Arc::clone(&self.reference), step, yaw);
+        }
+        env
+    }
+}
+
+#[derive(Default)]
+struct Score {
+    up: usize,
+    reached: usize,
+    to_end: usize,
+    episodes: usize,
+}
+
+impl std::fmt::Display for Score {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "up {:.0} steps per episode, reached {} / {}, up to the end {} / {}",
+            self.up as f64 / self.episodes.max(1) as f64,
+            self.reached,
+            self.episodes,
+            self.to_end,
+            self.episodes
+        )
+    }
+}
+
+/// The student's mean action (`None`: zero residual, the base alone) on unseen tasks.
+fn evaluate(s: &Setup, student: Option<&Learner>, args: &Args, stand: bool) -> Result<Score> {
+    let mut score = Score::default();
+    let zero = vec![0.0f32; s.model.dofs.len()];
+    for task in s.bench.tasks(Split::Unseen).iter().take(args.eval_tasks) {
+        let mut env = s.start(task, stand, 0);
+        let mut up = 0;
+        for t in 0..args.eval_steps {
+            let action = match student {
+                Some(l) => l.actor_critic.act_deterministic(&env.observation())?,
+                None => zero.clone(),
+            };
+            let r = env.step(&action);
+            if down(&env, &r, 0.7) {
+                break;
+            }
+            up = t + 1;
+            if r.done {
+                break;
+            }
+        }
+        score.up += up;
+        score.reached += env.reached as usize;
+        score.to_end += (up == args.eval_steps) as usize;
+        score.episodes += 1;
+    }
+    Ok(score)
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    let train = TrainConfig::from_toml_file(&args.config)?;
+    let Some(gait) = train.env.gait.clone() else {
+        bail!("{}: the distillation needs [env.gait]", args.config.display());
+    };
+    let model = CharacterModel::amp_humanoid();
+    let dir = std::env::var("LHM_MOTION_DIR").map(PathBuf::from).unwrap_or_else(|_| {
+        PathBuf::from(std::env::var("HOME").unwrap_or_default()).join(".cache/lhm/motions")
+    });
+    let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&train.env, &train.sim))
+        .with_context(|| format!("motion clips in {}", dir.display()))?;
+    let reference = Arc::new(
+        reference_for(&model, &demo, &gait.clip, 1.0 / train.sim.control_hz)
+            .map_err(anyhow::Error::msg)?,
+    );
+    let setup = Setup {
+        model,
+        bench: Benchmark::embedded()?,
+        demo,
+        reference,
+        train,
+    };
+    let mut learner = Learner::new(setup.train.learner_config())?;
+    let (obs_dim, act_dim) = (learner.config.obs_dim, learner.config.act_dim);
+    std::fs::create_dir_all(&args.out)?;
+    let mut data = DaggerDataset::open(&args.out.join("dataset"), obs_dim, act_dim, 1_000_000)?;
+    let mut trainer = StudentTrainer::new(
+        StudentConfig {
+            adam: lhm_nets::AdamConfig {
+                lr: args.lr,
+                ..StudentConfig::default().adam
+            },
+            epochs: args.epochs,
+            ..StudentConfig::default()
+        },
+        &learner.actor_critic,
+    )?;
+    let planner_config = PlannerConfig {
+        samples: args.samples,
+        horizon: args.horizon,
+        ..PlannerConfig::default()
+    };
+    let mut rng = SplitMix64::new(args.seed);
+    let tasks = setup.bench.tasks(Split::Train);
+    for stand in [false, true] {
+        println!(
+            "base alone, {} starts: {}",
+            if stand { "standing" } else { "gait" },
+            evaluate(&setup, None, &args, stand)?
+        );
+    }
+    for round in 0..args.rounds {
+        let clock = Instant::now();
+        let beta = args.beta.powi(round as i32);
+        let (mut obs_rows, mut label_rows) = (Vec::new(), Vec::new());
+        let mut collected = Score::default();
+        for _ in 0..args.episodes {
+            let task = &tasks[rng.below(tasks.len())];
+            let stand = rng.next_f64() < args.stand_start;
+            let mut env = setup.start(task, stand, rng.below(setup.reference.len()));
+            let mut workers: Vec<TaskEnv> = (0..planner_config.threads)
+                .map(|_| setup.env(task))
+                .collect();
+            let mut planner = Planner::new(
+                PlannerConfig {
+                    seed: rng.next_u64(),
+                    ..planner_config.clone()
+                },
+                act_dim,
+            )
+            .map_err(anyhow::Error::msg)?;
+            let mut up = 0;
+            for t in 0..args.episode_steps {
+                let obs = env.observation();
+                let label = planner.act(&env, &mut workers);
+                let action = if rng.next_f64() < beta {
+                    label.clone()
+                } else {
+                    learner.actor_critic.act_deterministic(&obs)?
+                };
+                obs_rows.extend_from_slice(&obs);
+                label_rows.extend_from_slice(&label);
+                let r = env.step(&action);
+                if down(&env, &r, planner_config.up_height) {
+                    break;
+                }
+                up = t + 1;
+                if r.done {
+                    break;
+                }
+            }
+            collected.up += up;
+            collected.reached += env.reached as usize;
+            collected.to_end += (up == args.episode_steps) as usize;
+            collected.episodes += 1;
+        }
+        let rows = label_rows.len() / act_dim;
+        if rows == 0 {
+            bail!("round {round} collected no rows");
+        }
+        data.append(&obs_rows, &label_rows)?;
+        let stats = trainer.train_round(&mut learner.actor_critic, &data, rows, &mut rng)?;
+        let gait_score = evaluate(&setup, Some(&learner), &args, false)?;
+        let stand_score = evaluate(&setup, Some(&learner), &args, true)?;
+        learner.save_policy(&args.out.join("policy"))?;
+        setup.train.write_run_config(&args.out)?;
+        println!(
+            "round {round} (β {beta:.3}, {:.0} s): collected {rows} rows ({collected}); dataset {} rows; \
+             loss {:.4} -> {:.4}; student from gait starts: {gait_score}; from standing: {stand_score}",
+            clock.elapsed().as_secs_f64(),
+            data.len(),
+            stats.loss_before,
+            stats.loss_after,
+        );
+    }
+    Ok(())
+}
