@@ -158,12 +158,17 @@ fn main() -> Result<()> {
     let args = Args::parse();
     let train = TrainConfig::from_toml_file(&args.config)?;
     let Some(gait) = train.env.gait.clone() else {
-        bail!("{}: the distillation needs [env.gait]", args.config.display());
+        bail!(
+            "{}: the distillation needs [env.gait]",
+            args.config.display()
+        );
     };
     let model = CharacterModel::amp_humanoid();
-    let dir = std::env::var("LHM_MOTION_DIR").map(PathBuf::from).unwrap_or_else(|_| {
-        PathBuf::from(std::env::var("HOME").unwrap_or_default()).join(".cache/lhm/motions")
-    });
+    let dir = std::env::var("LHM_MOTION_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| {
+            PathBuf::from(std::env::var("HOME").unwrap_or_default()).join(".cache/lhm/motions")
+        });
     let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&train.env, &train.sim))
         .with_context(|| format!("motion clips in {}", dir.display()))?;
     let reference = Arc::new(

@@ -20,7 +20,9 @@
 //! task's own standing start (actions are then the policy's: zero is the neutral pose);
 //! `STAND_START=1`: the gait from the task's standing start (at rest, the task's heading).
 //! `SPLIT` (unseen), `FIRST` (index of the first task, 0), `THREADS` (2), `UP_HEIGHT` (a rollout with the root below it counts as fallen, 0.7 m),
-//! `GIF=path` (the first task, every other step). Prints per task: control steps up, reached,
+//! `GIF=path` (the first task, every other step). Planner settings (`PlannerConfig`): `SAMPLES`,
+//! `HORIZON`, `KNOT`, `SIGMA`, `THREADS`, `FALL_COST`, `SPEED_COST`, `EFFORT_COST`, `HEIGHT_COST`,
+//! `STAND_HEIGHT`, `TILT_COST`, `DECAY`, `TEMPERATURE`. Prints per task: control steps up, reached,
 //! stopped, the root's speed at the end, wall time; then the totals.
 
 use std::time::Instant;
@@ -88,9 +90,7 @@ impl Problem<'_> {
                 env.start_in_gait(self.demo, reference.clone(), 0, yaw);
             }
         }
-        let mut workers: Vec<TaskEnv> = (0..self.planner.threads)
-            .map(|_| self.env(task))
-            .collect();
+        let mut workers: Vec<TaskEnv> = (0..self.planner.threads).map(|_| self.env(task)).collect();
         let mut planner = Planner::new(
             PlannerConfig {
                 seed,
@@ -143,6 +143,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         fall_cost: var("FALL_COST", d.fall_cost),
         speed_cost: var("SPEED_COST", d.speed_cost),
         effort_cost: var("EFFORT_COST", d.effort_cost),
+        height_cost: var("HEIGHT_COST", d.height_cost),
+        stand_height: var("STAND_HEIGHT", d.stand_height),
+        tilt_cost: var("TILT_COST", d.tilt_cost),
         up_height: var("UP_HEIGHT", d.up_height),
         decay: var("DECAY", d.decay),
         temperature: var("TEMPERATURE", d.temperature),

@@ -9,6 +9,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use rapier3d::math::Vector;
+
 use crate::env::{EnvSnapshot, StepResult, TaskEnv};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -27,6 +29,12 @@ pub struct PlannerConfig {
     /// Once the object is reached or the gait has stopped: cost per step per (m/s)² of the root's
     /// horizontal speed (standing still is what is asked).
     pub speed_cost: f32,
+    /// Posture, per step: this times how far (m) the root is below `stand_height` (squats,
+    /// lunges) …
+    pub height_cost: f32,
+    pub stand_height: f32,
+    /// … and this times 1 − the torso's up axis · world up (leaning). Both 0: off.
+    pub tilt_cost: f32,
     /// Cost per step of the mean squared action.
     pub effort_cost: f32,
     /// A rollout whose root goes below this height (m) counts as fallen; the environment's own
@@ -56,6 +64,9 @@ impl Default for PlannerConfig {
             sigma: 0.3,
             fall_cost: 50.0,
             speed_cost: 2.0,
+            height_cost: 0.0,
+            stand_height: 0.85,
+            tilt_cost: 0.0,
             effort_cost: 0.01,
             up_height: 0.7,
             decay: 1.0,
@@ -158,11 +169,6 @@ impl Planner {
         self.nominal.fill(0.0);
     }
 
-    /// The nominal plan's first action.
-    pub fn first_action(&self) -> &[f32] {
-        &self.nominal[..self.act_dim]
-    }
-
     /// Plans from `env`'s current state and returns the action to take now; `workers` are
     /// environments of the same task and configuration (at least one) that the rollouts run in.
     /// Afterwards the plan is shifted by a step: call once per control step.
@@ -210,11 +216,18 @@ impl Planner {
         action
     }
 
-    fn costs(&self, snapshot: &EnvSnapshot, plans: &[Vec<f32>], workers: &mut [TaskEnv]) -> Vec<f32> {
+    fn costs(
+        &self,
+        snapshot: &EnvSnapshot,
+        plans: &[Vec<f32>],
+        workers: &mut [TaskEnv],
+    ) -> Vec<f32> {
         if workers.is_empty() {
             return vec![f32::INFINITY; plans.len()];
         }
-        let per = plans.len().div_ceil(workers.len().min(self.config.threads).max(1));
+        let per = plans
+            .len()
+            .div_ceil(workers.len().min(self.config.threads).max(1));
         let config = &self.config;
         std::thread::scope(|scope| {
             let handles: Vec<_> = plans
@@ -231,10 +244,7 @@ impl Planner {
                 .collect();
             handles
                 .into_iter()
-                .flat_map(|h| {
-                    h.join()
-                        .unwrap_or_else(|_| vec![f32::INFINITY; per])
-                })
+                .flat_map(|h| h.join().unwrap_or_else(|_| vec![f32::INFINITY; per]))
                 .collect()
         })
     }
@@ -258,9 +268,24 @@ impl Planner {
     }
 }
 
+/// The posture terms of a step's cost: root below the standing height, torso tilt.
+pub fn posture_cost(env: &TaskEnv, c: &PlannerConfig) -> f32 {
+    let low = (c.stand_height - env.world.root_height()).max(0.0);
+    let tilt = env
+        .model
+        .body_index("torso")
+        .map_or(0.0, |i| 1.0 - (env.world.body_state(i).rot * Vector::Z).z);
+    c.height_cost * low + c.tilt_cost * tilt
+}
+
 /// Cost of rolling `plan` (horizon × action dim) out of `snapshot` in `env`: minus the
 /// environment's reward, a fall's cost, the speed cost while stopping, the effort.
-pub fn plan_cost(env: &mut TaskEnv, snapshot: &EnvSnapshot, plan: &[f32], c: &PlannerConfig) -> f32 {
+pub fn plan_cost(
+    env: &mut TaskEnv,
+    snapshot: &EnvSnapshot,
+    plan: &[f32],
+    c: &PlannerConfig,
+) -> f32 {
     env.restore(snapshot);
     let d = plan.len() / c.horizon.max(1);
     let mut cost = 0.0;
@@ -276,6 +301,9 @@ pub fn plan_cost(env: &mut TaskEnv, snapshot: &EnvSnapshot, plan: &[f32], c: &Pl
             cost += c.speed_cost * v * v;
         }
         cost += c.effort_cost * a.iter().map(|x| x * x).sum::<f32>() / d.max(1) as f32;
+        if c.height_cost > 0.0 || c.tilt_cost > 0.0 {
+            cost += posture_cost(env, c);
+        }
         if r.done {
             break;
         }

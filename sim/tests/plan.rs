@@ -44,11 +44,7 @@ fn push(env: &mut TaskEnv, model: &CharacterModel, v: f32) {
 }
 
 /// Control steps up (of `steps`) with `act` choosing each action.
-fn steps_up(
-    env: &mut TaskEnv,
-    steps: usize,
-    mut act: impl FnMut(&TaskEnv) -> Vec<f32>,
-) -> usize {
+fn steps_up(env: &mut TaskEnv, steps: usize, mut act: impl FnMut(&TaskEnv) -> Vec<f32>) -> usize {
     for t in 0..steps {
         let action = act(env);
         let r = env.step(&action);
@@ -159,4 +155,27 @@ fn bad_planner_settings_are_refused_by_name() {
         let err = Planner::new(config, 28).unwrap_err();
         assert!(err.contains(field), "{err}");
     }
+}
+
+#[test]
+fn the_posture_cost_is_nothing_standing_and_grows_once_the_character_has_fallen() {
+    let model = CharacterModel::amp_humanoid();
+    let bench = Benchmark::embedded().unwrap();
+    let config = PlannerConfig {
+        height_cost: 20.0,
+        tilt_cost: 10.0,
+        ..PlannerConfig::default()
+    };
+    let mut env = empty_env(&model, &bench);
+    assert!(
+        lhm_sim::plan::posture_cost(&env, &config) < 0.05,
+        "standing start: {}",
+        lhm_sim::plan::posture_cost(&env, &config)
+    );
+    push(&mut env, &model, 1.0);
+    let zero = vec![0.0; model.dofs.len()];
+    let up = steps_up(&mut env, 200, |_| zero.clone());
+    assert!(up < 200, "a 1 m/s push did not topple the neutral pose");
+    let fallen = lhm_sim::plan::posture_cost(&env, &config);
+    assert!(fallen > 2.0, "fallen: {fallen}");
 }
