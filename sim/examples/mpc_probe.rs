@@ -22,7 +22,8 @@
 //! `SPLIT` (unseen), `FIRST` (index of the first task, 0), `THREADS` (2), `UP_HEIGHT` (a rollout with the root below it counts as fallen, 0.7 m),
 //! `GIF=path` (the first task, every other step). Planner settings (`PlannerConfig`): `SAMPLES`,
 //! `HORIZON`, `KNOT`, `SIGMA`, `THREADS`, `FALL_COST`, `SPEED_COST`, `EFFORT_COST`, `HEIGHT_COST`,
-//! `STAND_HEIGHT`, `TILT_COST`, `DECAY`, `TEMPERATURE`. Prints per task: control steps up, reached,
+//! `STAND_HEIGHT`, `TILT_COST`, `DECAY`, `TEMPERATURE`; `PLAN_DOFS=legs` plans hips, knees,
+//! ankles and abdomen only (arms, neck keep the base's targets). Prints per task: control steps up, reached,
 //! stopped, the root's speed at the end, wall time; then the totals.
 
 use std::time::Instant;
@@ -60,6 +61,9 @@ struct Problem<'a> {
     reference: Option<std::sync::Arc<GaitReference>>,
     planner: PlannerConfig,
     stand_start: bool,
+    /// DoFs whose names contain one of these are planned (`PLAN_DOFS=legs`: hips, knees, ankles,
+    /// abdomen; default: all).
+    planned_prefixes: Vec<String>,
 }
 
 impl Problem<'_> {
@@ -97,6 +101,17 @@ impl Problem<'_> {
                 ..self.planner.clone()
             },
             self.model.dofs.len(),
+        )?
+        .with_planned(
+            self.model
+                .dofs
+                .iter()
+                .map(|d| {
+                    self.planned_prefixes
+                        .iter()
+                        .any(|p| d.name.contains(p.as_str()))
+                })
+                .collect(),
         )?;
         let mut up = 0;
         let (mut sq, mut n) = (0.0f32, 0usize);
@@ -197,6 +212,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         reference,
         planner,
         stand_start: std::env::var_os("STAND_START").is_some(),
+        planned_prefixes: match std::env::var("PLAN_DOFS").as_deref() {
+            Ok("legs") => ["hip", "knee", "ankle", "abdomen"]
+                .map(String::from)
+                .to_vec(),
+            _ => vec![String::new()],
+        },
     };
     let gif = std::env::var("GIF").ok();
     let (mut up_all, mut reached, mut stood) = (0, 0, 0);

@@ -151,6 +151,8 @@ pub struct Planner {
     act_dim: usize,
     nominal: Vec<f32>,
     noise: Noise,
+    /// Per DoF: whether the planner moves it (the rest keep a zero action).
+    planned: Vec<bool>,
 }
 
 impl Planner {
@@ -159,9 +161,24 @@ impl Planner {
         Ok(Self {
             nominal: vec![0.0; config.horizon * act_dim],
             noise: Noise(config.seed),
+            planned: vec![true; act_dim],
             act_dim,
             config,
         })
+    }
+
+    /// Plans only the DoFs whose entry is `true` (e.g. legs and trunk); the others keep a zero
+    /// action. A mask of the wrong length is refused.
+    pub fn with_planned(mut self, planned: Vec<bool>) -> Result<Self, String> {
+        if planned.len() != self.act_dim {
+            return Err(format!(
+                "planner: a mask of {} DoFs for {} actions",
+                planned.len(),
+                self.act_dim
+            ));
+        }
+        self.planned = planned;
+        Ok(self)
     }
 
     /// Forgets the plan (a new episode); the noise goes on.
@@ -259,7 +276,7 @@ impl Planner {
         let mut plan = self.nominal.clone();
         for k in 0..c.horizon {
             let (i, frac) = (k / c.knot, (k % c.knot) as f32 / c.knot as f32);
-            for j in 0..d {
+            for j in (0..d).filter(|&j| self.planned[j]) {
                 let n = drawn[i * d + j] * (1.0 - frac) + drawn[(i + 1) * d + j] * frac;
                 plan[k * d + j] = (plan[k * d + j] + n).clamp(-1.0, 1.0);
             }

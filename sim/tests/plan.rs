@@ -179,3 +179,42 @@ fn the_posture_cost_is_nothing_standing_and_grows_once_the_character_has_fallen(
     let fallen = lhm_sim::plan::posture_cost(&env, &config);
     assert!(fallen > 2.0, "fallen: {fallen}");
 }
+
+#[test]
+fn a_planner_moves_only_the_dofs_it_plans() {
+    let model = CharacterModel::amp_humanoid();
+    let bench = Benchmark::embedded().unwrap();
+    let d = model.dofs.len();
+    let planned: Vec<bool> = (0..d).map(|i| i % 2 == 0).collect();
+    let config = PlannerConfig {
+        samples: 4,
+        horizon: 6,
+        knot: 3,
+        threads: 1,
+        ..PlannerConfig::default()
+    };
+    let mut planner = Planner::new(config.clone(), d)
+        .unwrap()
+        .with_planned(planned.clone())
+        .unwrap();
+    let mut env = empty_env(&model, &bench);
+    let mut workers = vec![empty_env(&model, &bench)];
+    let mut moved = vec![false; d];
+    for _ in 0..3 {
+        let a = planner.act(&env, &mut workers);
+        for (m, x) in moved.iter_mut().zip(&a) {
+            *m |= *x != 0.0;
+        }
+        env.step(&a);
+    }
+    for i in 0..d {
+        if !planned[i] {
+            assert!(!moved[i], "DoF {i} is not planned but moved");
+        }
+    }
+    assert!(moved.iter().any(|&m| m), "nothing moved");
+    assert!(Planner::new(config, d)
+        .unwrap()
+        .with_planned(vec![true; d - 1])
+        .is_err());
+}
