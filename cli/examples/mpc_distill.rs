@@ -68,6 +68,9 @@ struct Args {
     lr: f64,
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Plan hips, knees, ankles and abdomen only (arms and neck keep a zero residual).
+    #[arg(long)]
+    legs_only: bool,
 }
 
 struct Setup {
@@ -202,6 +205,17 @@ fn main() -> Result<()> {
         horizon: args.horizon,
         ..PlannerConfig::default()
     };
+    let planned: Vec<bool> = setup
+        .model
+        .dofs
+        .iter()
+        .map(|d| {
+            !args.legs_only
+                || ["hip", "knee", "ankle", "abdomen"]
+                    .iter()
+                    .any(|p| d.name.contains(p))
+        })
+        .collect();
     let mut rng = SplitMix64::new(args.seed);
     let tasks = setup.bench.tasks(Split::Train);
     for stand in [false, true] {
@@ -230,6 +244,7 @@ fn main() -> Result<()> {
                 },
                 act_dim,
             )
+            .and_then(|p| p.with_planned(planned.clone()))
             .map_err(anyhow::Error::msg)?;
             let mut up = 0;
             for t in 0..args.episode_steps {
