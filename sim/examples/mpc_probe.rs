@@ -22,7 +22,7 @@
 //! `SPLIT` (unseen), `FIRST` (index of the first task, 0), `THREADS` (2), `UP_HEIGHT` (a rollout with the root below it counts as fallen, 0.7 m),
 //! `GIF=path` (the first task, every other step). Planner settings (`PlannerConfig`): `SAMPLES`,
 //! `HORIZON`, `KNOT`, `SIGMA`, `THREADS`, `FALL_COST`, `SPEED_COST`, `EFFORT_COST`, `HEIGHT_COST`,
-//! `STAND_HEIGHT`, `TILT_COST`, `DECAY`, `TEMPERATURE`; `PLAN_DOFS=legs` plans hips, knees,
+//! `STAND_HEIGHT`, `TILT_COST`, `POSE_COST`, `DECAY`, `TEMPERATURE`; `PLAN_DOFS=legs` plans hips, knees,
 //! ankles and abdomen only (arms, neck keep the base's targets). Prints per task: control steps up, reached,
 //! stopped, the root's speed at the end, wall time; then the totals.
 
@@ -161,6 +161,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         height_cost: var("HEIGHT_COST", d.height_cost),
         stand_height: var("STAND_HEIGHT", d.stand_height),
         tilt_cost: var("TILT_COST", d.tilt_cost),
+        pose_cost: var("POSE_COST", d.pose_cost),
         up_height: var("UP_HEIGHT", d.up_height),
         decay: var("DECAY", d.decay),
         temperature: var("TEMPERATURE", d.temperature),

@@ -437,6 +437,17 @@ impl TaskEnv {
         self.start_gait(reference, step)
     }
 
+    /// The joint angles the gait's reference holds at its next step (the neutral pose's zeros once
+    /// it has stopped); `None` without a gait.
+    pub fn gait_reference_angles(&self) -> Option<Vec<f32>> {
+        let run = self.gait.as_ref()?;
+        Some(if run.stopped {
+            vec![0.0; self.model.dofs.len()]
+        } else {
+            run.reference.at(run.step).1.to_vec()
+        })
+    }
+
     /// Whether a gait runs this episode (walking or stopped).
     pub fn gait_running(&self) -> bool {
         self.gait.is_some()

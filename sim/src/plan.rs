@@ -35,6 +35,9 @@ pub struct PlannerConfig {
     pub stand_height: f32,
     /// … and this times 1 − the torso's up axis · world up (leaning). Both 0: off.
     pub tilt_cost: f32,
+    /// Per step: this times the mean squared difference (rad²) between the character's joint angles
+    /// and the gait reference's (DeepMimic's pose term as a cost; 0: off; no gait: nothing).
+    pub pose_cost: f32,
     /// Cost per step of the mean squared action.
     pub effort_cost: f32,
     /// A rollout whose root goes below this height (m) counts as fallen; the environment's own
@@ -67,6 +70,7 @@ impl Default for PlannerConfig {
             height_cost: 0.0,
             stand_height: 0.85,
             tilt_cost: 0.0,
+            pose_cost: 0.0,
             effort_cost: 0.01,
             up_height: 0.7,
             decay: 1.0,
@@ -285,14 +289,29 @@ impl Planner {
     }
 }
 
-/// The posture terms of a step's cost: root below the standing height, torso tilt.
+/// The posture terms of a step's cost: root below the standing height, torso tilt, joint angles
+/// off the gait reference's.
 pub fn posture_cost(env: &TaskEnv, c: &PlannerConfig) -> f32 {
     let low = (c.stand_height - env.world.root_height()).max(0.0);
     let tilt = env
         .model
         .body_index("torso")
         .map_or(0.0, |i| 1.0 - (env.world.body_state(i).rot * Vector::Z).z);
-    c.height_cost * low + c.tilt_cost * tilt
+    let pose = if c.pose_cost > 0.0 {
+        env.gait_reference_angles().map_or(0.0, |reference| {
+            let angles = crate::fidelity::joint_angles(&env.model, &env.world.body_states());
+            let n = angles.len().min(reference.len()).max(1);
+            angles
+                .iter()
+                .zip(&reference)
+                .map(|(a, r)| (a - r) * (a - r))
+                .sum::<f32>()
+                / n as f32
+        })
+    } else {
+        0.0
+    };
+    c.height_cost * low + c.tilt_cost * tilt + c.pose_cost * pose
 }
 
 /// Cost of rolling `plan` (horizon × action dim) out of `snapshot` in `env`: minus the
@@ -318,7 +337,7 @@ pub fn plan_cost(
             cost += c.speed_cost * v * v;
         }
         cost += c.effort_cost * a.iter().map(|x| x * x).sum::<f32>() / d.max(1) as f32;
-        if c.height_cost > 0.0 || c.tilt_cost > 0.0 {
+        if c.height_cost > 0.0 || c.tilt_cost > 0.0 || c.pose_cost > 0.0 {
             cost += posture_cost(env, c);
         }
         if r.done {

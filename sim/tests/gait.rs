@@ -213,9 +213,15 @@ fn in_the_gait_actions_are_residuals_on_the_base_and_the_policy_reads_the_phase(
     assert_eq!(obs.len(), dim);
     assert_eq!(&obs[dim - 2..], &[0.0, 0.0]);
     let yaw = env.yaw_toward_first_object();
+    assert_eq!(env.gait_reference_angles(), None, "no gait yet");
     assert!(env.start_in_gait(&demo, Arc::clone(&reference), 9, yaw));
     assert!(env.demo_start);
     assert_eq!(env.gait_phase(), Some(0.25));
+    assert_eq!(
+        env.gait_reference_angles().as_deref(),
+        Some(reference.at(9).1),
+        "the reference's angles at the step the gait plays next"
+    );
     let obs = env.observation();
     assert!(
         (obs[dim - 2] - 1.0).abs() < 1e-5 && obs[dim - 1].abs() < 1e-5,
@@ -270,6 +276,11 @@ fn within_the_stop_distance_the_base_stands_and_the_phase_reads_zero() {
         env.step(&vec![0.0; model.dofs.len()]);
     }
     assert_eq!(env.gait_phase(), None, "stopped");
+    assert_eq!(
+        env.gait_reference_angles(),
+        Some(vec![0.0; model.dofs.len()]),
+        "stopped: the neutral pose"
+    );
     let dim = TaskEnv::obs_dim(&model, &env.config);
     assert_eq!(&env.observation()[dim - 2..], &[0.0, 0.0]);
     let after = joint_angles(&model, &env.world.body_states())[hip].abs();
