@@ -167,11 +167,7 @@ fn main() -> Result<()> {
         );
     };
     let model = CharacterModel::amp_humanoid();
-    let dir = std::env::var("LHM_MOTION_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| {
-            PathBuf::from(std::env::var("HOME").unwrap_or_default()).join(".cache/lhm/motions")
-        });
+    let dir = lhm_sim::motion::default_dir();
     let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&train.env, &train.sim))
         .with_context(|| format!("motion clips in {}", dir.display()))?;
     let reference = Arc::new(
