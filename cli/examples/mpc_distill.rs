@@ -114,6 +114,16 @@ struct Score {
     episodes: usize,
 }
 
+impl Score {
+    /// One episode that stayed up `up` of `steps` control steps.
+    fn add(&mut self, env: &TaskEnv, up: usize, steps: usize) {
+        self.up += up;
+        self.reached += env.reached as usize;
+        self.to_end += (up == steps) as usize;
+        self.episodes += 1;
+    }
+}
+
 impl std::fmt::Display for Score {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
@@ -149,10 +159,7 @@ fn evaluate(s: &Setup, student: Option<&Learner>, args: &Args, stand: bool) -> R
                 break;
             }
         }
-        score.up += up;
-        score.reached += env.reached as usize;
-        score.to_end += (up == args.eval_steps) as usize;
-        score.episodes += 1;
+        score.add(&env, up, args.eval_steps);
     }
     Ok(score)
 }
@@ -262,10 +269,7 @@ fn main() -> Result<()> {
                     break;
                 }
             }
-            collected.up += up;
-            collected.reached += env.reached as usize;
-            collected.to_end += (up == args.episode_steps) as usize;
-            collected.episodes += 1;
+            collected.add(&env, up, args.episode_steps);
         }
         let rows = label_rows.len() / act_dim;
         if rows == 0 {

@@ -185,11 +185,6 @@ impl Planner {
         Ok(self)
     }
 
-    /// Forgets the plan (a new episode); the noise goes on.
-    pub fn reset(&mut self) {
-        self.nominal.fill(0.0);
-    }
-
     /// Plans from `env`'s current state and returns the action to take now; `workers` are
     /// environments of the same task and configuration (at least one) that the rollouts run in.
     /// Afterwards the plan is shifted by a step: call once per control step.
@@ -201,40 +196,51 @@ impl Planner {
             candidates.push(plan);
         }
         let costs = self.costs(&snapshot, &candidates, workers);
+        self.nominal = self.choose(candidates, &costs);
+        let action = self.nominal[..self.act_dim].to_vec();
+        self.shift();
+        action
+    }
+
+    /// The next nominal plan: the cheapest candidate, or with a temperature the candidates' mean
+    /// weighted by exp(−(cost − cheapest) / temperature).
+    fn choose(&self, mut candidates: Vec<Vec<f32>>, costs: &[f32]) -> Vec<f32> {
         let best = (0..costs.len())
             .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
             .unwrap_or(0);
         let t = self.config.temperature;
-        if t > 0.0 && costs[best].is_finite() {
-            let weights: Vec<f32> = costs
-                .iter()
-                .map(|c| (-(c - costs[best]) / t).exp())
-                .map(|w| if w.is_finite() { w } else { 0.0 })
-                .collect();
-            let total: f32 = weights.iter().sum();
-            let mut mean = vec![0.0f32; self.nominal.len()];
-            for (plan, w) in candidates.iter().zip(&weights) {
-                for (m, x) in mean.iter_mut().zip(plan) {
-                    *m += w / total * x;
-                }
-            }
-            self.nominal = mean;
-        } else {
-            self.nominal = candidates.swap_remove(best);
+        if t <= 0.0 || !costs[best].is_finite() {
+            return candidates.swap_remove(best);
         }
-        let action = self.nominal[..self.act_dim].to_vec();
-        // Shift a step; the last action is held.
-        self.nominal.drain(..self.act_dim);
-        let last = self.nominal[self.nominal.len().saturating_sub(self.act_dim)..].to_vec();
-        if last.len() == self.act_dim {
-            self.nominal.extend(last);
+        let weights: Vec<f32> = costs
+            .iter()
+            .map(|c| (-(c - costs[best]) / t).exp())
+            .map(|w| if w.is_finite() { w } else { 0.0 })
+            .collect();
+        let total: f32 = weights.iter().sum();
+        let mut mean = vec![0.0f32; self.nominal.len()];
+        for (plan, w) in candidates.iter().zip(&weights) {
+            for (m, x) in mean.iter_mut().zip(plan) {
+                *m += w / total * x;
+            }
+        }
+        mean
+    }
+
+    /// Moves the plan a step on (its last action held; zero for a one-step horizon) and pulls
+    /// it toward zero by `decay`.
+    fn shift(&mut self) {
+        let d = self.act_dim;
+        let n = self.nominal.len();
+        self.nominal.rotate_left(d);
+        if n >= 2 * d {
+            self.nominal.copy_within(n - 2 * d..n - d, n - d);
         } else {
-            self.nominal.extend(std::iter::repeat_n(0.0, self.act_dim));
+            self.nominal[n - d..].fill(0.0);
         }
         for x in &mut self.nominal {
             *x *= self.config.decay;
         }
-        action
     }
 
     fn costs(

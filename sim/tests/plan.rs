@@ -55,6 +55,17 @@ fn steps_up(env: &mut TaskEnv, steps: usize, mut act: impl FnMut(&TaskEnv) -> Ve
     steps
 }
 
+/// A planner small enough to step a few times in a test, on one thread.
+fn small_config() -> PlannerConfig {
+    PlannerConfig {
+        samples: 4,
+        horizon: 6,
+        knot: 3,
+        threads: 1,
+        ..PlannerConfig::default()
+    }
+}
+
 fn planner_config() -> PlannerConfig {
     PlannerConfig {
         samples: 16,
@@ -107,13 +118,7 @@ fn the_same_seed_plans_the_same_actions_and_one_sample_plays_the_nominal_plan() 
         }
         out
     };
-    let config = PlannerConfig {
-        samples: 4,
-        horizon: 6,
-        knot: 3,
-        threads: 1,
-        ..PlannerConfig::default()
-    };
+    let config = small_config();
     let a = first_actions(config.clone());
     assert_eq!(a, first_actions(config.clone()));
     assert!(
@@ -186,13 +191,7 @@ fn a_planner_moves_only_the_dofs_it_plans() {
     let bench = Benchmark::embedded().unwrap();
     let d = model.dofs.len();
     let planned: Vec<bool> = (0..d).map(|i| i % 2 == 0).collect();
-    let config = PlannerConfig {
-        samples: 4,
-        horizon: 6,
-        knot: 3,
-        threads: 1,
-        ..PlannerConfig::default()
-    };
+    let config = small_config();
     let mut planner = Planner::new(config.clone(), d)
         .unwrap()
         .with_planned(planned.clone())
