@@ -71,6 +71,25 @@ struct Args {
     /// Plan hips, knees, ankles and abdomen only (arms and neck keep a zero residual).
     #[arg(long)]
     legs_only: bool,
+    /// Plan around the student (PLATO): every rollout step's action is the student's mean action
+    /// plus the plan's correction (`Planner::act_around`), so a label is the student's action
+    /// corrected rather than the planner's own plan.
+    #[arg(long)]
+    prior: bool,
+    /// The planner's `decay` (1: plain warm start; below 1 the corrections fade back to the
+    /// student, or to the base without `--prior`).
+    #[arg(long, default_value_t = 1.0)]
+    decay: f32,
+    /// The planner's `temperature` (0: the cheapest plan; above 0: MPPI's weighted mean, which
+    /// averages the selected noise out of the labels).
+    #[arg(long, default_value_t = 0.0)]
+    temperature: f32,
+    /// Collection episodes (and evaluation tasks) run this many at once.
+    #[arg(long, default_value_t = 1)]
+    parallel: usize,
+    /// Planner threads per episode.
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
 }
 
 struct Setup {
@@ -116,9 +135,9 @@ struct Score {
 
 impl Score {
     /// One episode that stayed up `up` of `steps` control steps.
-    fn add(&mut self, env: &TaskEnv, up: usize, steps: usize) {
+    fn add(&mut self, reached: bool, up: usize, steps: usize) {
         self.up += up;
-        self.reached += env.reached as usize;
+        self.reached += reached as usize;
         self.to_end += (up == steps) as usize;
         self.episodes += 1;
     }
@@ -138,11 +157,39 @@ impl std::fmt::Display for Score {
     }
 }
 
+/// Runs `jobs` on `parallel` threads (in order of the inputs) and collects their results.
+fn in_parallel<I: Sync, T: Send>(
+    inputs: &[I],
+    parallel: usize,
+    job: impl Fn(&I) -> Result<T> + Sync,
+) -> Result<Vec<T>> {
+    let per = inputs.len().div_ceil(parallel.max(1)).max(1);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = inputs
+            .chunks(per)
+            .map(|chunk| scope.spawn(|| chunk.iter().map(&job).collect::<Result<Vec<T>>>()))
+            .collect();
+        let mut out = Vec::new();
+        for h in handles {
+            match h.join() {
+                Ok(r) => out.extend(r?),
+                Err(_) => bail!("a worker thread panicked"),
+            }
+        }
+        Ok(out)
+    })
+}
+
 /// The student's mean action (`None`: zero residual, the base alone) on unseen tasks.
 fn evaluate(s: &Setup, student: Option<&Learner>, args: &Args, stand: bool) -> Result<Score> {
-    let mut score = Score::default();
     let zero = vec![0.0f32; s.model.dofs.len()];
-    for task in s.bench.tasks(Split::Unseen).iter().take(args.eval_tasks) {
+    let tasks: Vec<&Task> = s
+        .bench
+        .tasks(Split::Unseen)
+        .iter()
+        .take(args.eval_tasks)
+        .collect();
+    let episodes = in_parallel(&tasks, args.parallel, |task| {
         let mut env = s.start(task, stand, 0);
         let mut up = 0;
         for t in 0..args.eval_steps {
@@ -159,9 +206,101 @@ fn evaluate(s: &Setup, student: Option<&Learner>, args: &Args, stand: bool) -> R
                 break;
             }
         }
-        score.add(&env, up, args.eval_steps);
+        Ok((env.reached, up))
+    })?;
+    let mut score = Score::default();
+    for (reached, up) in episodes {
+        score.add(reached, up, args.eval_steps);
     }
     Ok(score)
+}
+
+/// One collection episode's plan: where it starts and its random streams.
+struct EpisodeSpec<'a> {
+    task: &'a Task,
+    stand: bool,
+    cycle_step: usize,
+    planner_seed: u64,
+    mix_seed: u64,
+}
+
+/// The labelled rows of one episode: observations, the planner's actions, and how it went.
+struct Episode {
+    obs: Vec<f32>,
+    labels: Vec<f32>,
+    reached: bool,
+    up: usize,
+}
+
+/// Rolls one episode out with the planner's action (probability β) or the student's, labelling
+/// every visited state with the planner's action.
+fn collect_episode(
+    s: &Setup,
+    spec: &EpisodeSpec,
+    planner: &Planner,
+    student: &Learner,
+    args: &Args,
+    beta: f64,
+) -> Result<Episode> {
+    let mut env = s.start(spec.task, spec.stand, spec.cycle_step);
+    let mut workers: Vec<TaskEnv> = (0..planner.config.threads)
+        .map(|_| s.env(spec.task))
+        .collect();
+    let mut planner = Planner::new(
+        PlannerConfig {
+            seed: spec.planner_seed,
+            ..planner.config.clone()
+        },
+        student.config.act_dim,
+    )
+    .and_then(|p| p.with_planned(planner.planned().to_vec()))
+    .map_err(anyhow::Error::msg)?;
+    // The prior cannot return an error through the planner: a failed inference is recorded
+    // and ends the episode with that error below.
+    let failure = std::sync::Mutex::new(None::<String>);
+    let policy = |obs: &[f32]| -> Vec<f32> {
+        student
+            .actor_critic
+            .act_deterministic(obs)
+            .unwrap_or_else(|e| {
+                if let Ok(mut f) = failure.lock() {
+                    f.get_or_insert(e.to_string());
+                }
+                vec![0.0; student.config.act_dim]
+            })
+    };
+    let prior: Option<lhm_sim::plan::Prior> = if args.prior { Some(&policy) } else { None };
+    let mut rng = SplitMix64::new(spec.mix_seed);
+    let mut episode = Episode {
+        obs: Vec::new(),
+        labels: Vec::new(),
+        reached: false,
+        up: 0,
+    };
+    for t in 0..args.episode_steps {
+        let obs = env.observation();
+        let label = planner.act_around(&env, &mut workers, prior);
+        if let Some(e) = failure.lock().ok().and_then(|f| f.clone()) {
+            bail!("the student's inference inside the planner failed: {e}");
+        }
+        let action = if rng.next_f64() < beta {
+            label.clone()
+        } else {
+            student.actor_critic.act_deterministic(&obs)?
+        };
+        episode.obs.extend_from_slice(&obs);
+        episode.labels.extend_from_slice(&label);
+        let r = env.step(&action);
+        if down(&env, &r, planner.config.up_height) {
+            break;
+        }
+        episode.up = t + 1;
+        if r.done {
+            break;
+        }
+    }
+    episode.reached = env.reached;
+    Ok(episode)
 }
 
 fn main() -> Result<()> {
@@ -206,6 +345,9 @@ fn main() -> Result<()> {
     let planner_config = PlannerConfig {
         samples: args.samples,
         horizon: args.horizon,
+        decay: args.decay,
+        temperature: args.temperature,
+        threads: args.threads,
         ..PlannerConfig::default()
     };
     let planned: Vec<bool> = setup
@@ -219,6 +361,9 @@ fn main() -> Result<()> {
                     .any(|p| d.name.contains(p))
         })
         .collect();
+    let template = Planner::new(planner_config, act_dim)
+        .and_then(|p| p.with_planned(planned))
+        .map_err(anyhow::Error::msg)?;
     let mut rng = SplitMix64::new(args.seed);
     let tasks = setup.bench.tasks(Split::Train);
     for stand in [false, true] {
@@ -231,45 +376,24 @@ fn main() -> Result<()> {
     for round in 0..args.rounds {
         let clock = Instant::now();
         let beta = args.beta.powi(round as i32);
+        let specs: Vec<EpisodeSpec> = (0..args.episodes)
+            .map(|_| EpisodeSpec {
+                task: &tasks[rng.below(tasks.len())],
+                stand: rng.next_f64() < args.stand_start,
+                cycle_step: rng.below(setup.reference.len()),
+                planner_seed: rng.next_u64(),
+                mix_seed: rng.next_u64(),
+            })
+            .collect();
+        let episodes = in_parallel(&specs, args.parallel, |spec| {
+            collect_episode(&setup, spec, &template, &learner, &args, beta)
+        })?;
         let (mut obs_rows, mut label_rows) = (Vec::new(), Vec::new());
         let mut collected = Score::default();
-        for _ in 0..args.episodes {
-            let task = &tasks[rng.below(tasks.len())];
-            let stand = rng.next_f64() < args.stand_start;
-            let mut env = setup.start(task, stand, rng.below(setup.reference.len()));
-            let mut workers: Vec<TaskEnv> = (0..planner_config.threads)
-                .map(|_| setup.env(task))
-                .collect();
-            let mut planner = Planner::new(
-                PlannerConfig {
-                    seed: rng.next_u64(),
-                    ..planner_config.clone()
-                },
-                act_dim,
-            )
-            .and_then(|p| p.with_planned(planned.clone()))
-            .map_err(anyhow::Error::msg)?;
-            let mut up = 0;
-            for t in 0..args.episode_steps {
-                let obs = env.observation();
-                let label = planner.act(&env, &mut workers);
-                let action = if rng.next_f64() < beta {
-                    label.clone()
-                } else {
-                    learner.actor_critic.act_deterministic(&obs)?
-                };
-                obs_rows.extend_from_slice(&obs);
-                label_rows.extend_from_slice(&label);
-                let r = env.step(&action);
-                if down(&env, &r, planner_config.up_height) {
-                    break;
-                }
-                up = t + 1;
-                if r.done {
-                    break;
-                }
-            }
-            collected.add(&env, up, args.episode_steps);
+        for e in episodes {
+            obs_rows.extend_from_slice(&e.obs);
+            label_rows.extend_from_slice(&e.labels);
+            collected.add(e.reached, e.up, args.episode_steps);
         }
         let rows = label_rows.len() / act_dim;
         if rows == 0 {

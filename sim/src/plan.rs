@@ -13,6 +13,14 @@ use rapier3d::math::Vector;
 
 use crate::env::{EnvSnapshot, StepResult, TaskEnv};
 
+/// A policy the plans are corrections to: observation → action (e.g. a student's mean action).
+/// With a prior, a rollout's action at every step is the prior's action at that step's
+/// observation plus the plan's, so the planner searches around the policy, closed loop, instead
+/// of around the base alone; its chosen action is then the policy's action corrected — a label
+/// that depends on the state through the policy rather than on the planner's own history (PLATO,
+/// Kahn, Zhang, Levine, Abbeel 2017).
+pub type Prior<'a> = &'a (dyn Fn(&[f32]) -> Vec<f32> + Sync);
+
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PlannerConfig {
@@ -185,19 +193,39 @@ impl Planner {
         Ok(self)
     }
 
+    /// Per DoF: whether the planner moves it.
+    pub fn planned(&self) -> &[bool] {
+        &self.planned
+    }
+
     /// Plans from `env`'s current state and returns the action to take now; `workers` are
     /// environments of the same task and configuration (at least one) that the rollouts run in.
     /// Afterwards the plan is shifted by a step: call once per control step.
     pub fn act(&mut self, env: &TaskEnv, workers: &mut [TaskEnv]) -> Vec<f32> {
+        self.act_around(env, workers, None)
+    }
+
+    /// As [`Planner::act`], with the plans as corrections to `prior`'s actions (see [`Prior`]):
+    /// the returned action is the prior's action at `env`'s observation plus the chosen plan's
+    /// first, within [-1, 1].
+    pub fn act_around(
+        &mut self,
+        env: &TaskEnv,
+        workers: &mut [TaskEnv],
+        prior: Option<Prior>,
+    ) -> Vec<f32> {
         let snapshot = env.snapshot();
         let mut candidates = vec![self.nominal.clone()];
         for _ in 1..self.config.samples {
             let plan = self.perturbed();
             candidates.push(plan);
         }
-        let costs = self.costs(&snapshot, &candidates, workers);
+        let costs = self.costs(&snapshot, &candidates, workers, prior);
         self.nominal = self.choose(candidates, &costs);
-        let action = self.nominal[..self.act_dim].to_vec();
+        let mut action = self.nominal[..self.act_dim].to_vec();
+        if let Some(prior) = prior {
+            add_clamped(&mut action, &prior(&env.observation()));
+        }
         self.shift();
         action
     }
@@ -248,6 +276,7 @@ impl Planner {
         snapshot: &EnvSnapshot,
         plans: &[Vec<f32>],
         workers: &mut [TaskEnv],
+        prior: Option<Prior>,
     ) -> Vec<f32> {
         if workers.is_empty() {
             return vec![f32::INFINITY; plans.len()];
@@ -264,7 +293,7 @@ impl Planner {
                     scope.spawn(move || {
                         chunk
                             .iter()
-                            .map(|plan| plan_cost(worker, snapshot, plan, config))
+                            .map(|plan| plan_cost_around(worker, snapshot, plan, config, prior))
                             .collect::<Vec<f32>>()
                     })
                 })
@@ -328,10 +357,35 @@ pub fn plan_cost(
     plan: &[f32],
     c: &PlannerConfig,
 ) -> f32 {
+    plan_cost_around(env, snapshot, plan, c, None)
+}
+
+/// `a += b` within [-1, 1] (the action range).
+fn add_clamped(a: &mut [f32], b: &[f32]) {
+    for (x, y) in a.iter_mut().zip(b) {
+        *x = (*x + y).clamp(-1.0, 1.0);
+    }
+}
+
+/// [`plan_cost`] with the plan as corrections to `prior`'s actions, closed loop.
+pub fn plan_cost_around(
+    env: &mut TaskEnv,
+    snapshot: &EnvSnapshot,
+    plan: &[f32],
+    c: &PlannerConfig,
+    prior: Option<Prior>,
+) -> f32 {
     env.restore(snapshot);
     let d = plan.len() / c.horizon.max(1);
     let mut cost = 0.0;
-    for (k, a) in plan.chunks(d.max(1)).enumerate() {
+    let mut action = Vec::with_capacity(d);
+    for (k, step) in plan.chunks(d.max(1)).enumerate() {
+        action.clear();
+        action.extend_from_slice(step);
+        if let Some(prior) = prior {
+            add_clamped(&mut action, &prior(&env.observation()));
+        }
+        let a = action.as_slice();
         let r = env.step(a);
         if down(env, &r, c.up_height) {
             cost += c.fall_cost * (2.0 - k as f32 / c.horizon as f32);

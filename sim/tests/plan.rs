@@ -217,3 +217,62 @@ fn a_planner_moves_only_the_dofs_it_plans() {
         .with_planned(vec![true; d - 1])
         .is_err());
 }
+
+#[test]
+fn around_a_prior_one_sample_plays_the_prior_closed_loop_and_more_samples_correct_it() {
+    let model = CharacterModel::amp_humanoid();
+    let bench = Benchmark::embedded().unwrap();
+    let d = model.dofs.len();
+    // A closed-loop prior: every action depends on the observation it is given.
+    let prior = |obs: &[f32]| -> Vec<f32> {
+        (0..d)
+            .map(|j| (0.3 * obs[j % obs.len()]).clamp(-0.5, 0.5))
+            .collect()
+    };
+    let prior_ref: lhm_sim::plan::Prior = &prior;
+
+    let mut played = empty_env(&model, &bench);
+    let mut reference = empty_env(&model, &bench);
+    let mut workers = vec![empty_env(&model, &bench)];
+    let mut planner = Planner::new(
+        PlannerConfig {
+            samples: 1,
+            ..small_config()
+        },
+        d,
+    )
+    .unwrap();
+    for _ in 0..5 {
+        let a = planner.act_around(&played, &mut workers, Some(prior_ref));
+        let expected = prior(&reference.observation());
+        assert_eq!(a, expected, "one sample must play the prior's own action");
+        played.step(&a);
+        reference.step(&expected);
+    }
+
+    // Around a prior that does nothing useful (it lets a 0.6 m/s push topple the character, as
+    // the neutral pose does), the planner's corrections keep the character up.
+    let steps = 120;
+    let limp = |_: &[f32]| -> Vec<f32> { vec![0.0; d] };
+    let mut env = empty_env(&model, &bench);
+    push(&mut env, &model, 0.6);
+    let alone = steps_up(&mut env, steps, |env| limp(&env.observation()));
+    assert!(alone < steps, "the prior alone stood the push");
+    let mut env = empty_env(&model, &bench);
+    push(&mut env, &model, 0.6);
+    let config = planner_config();
+    let mut workers: Vec<TaskEnv> = (0..config.threads)
+        .map(|_| empty_env(&model, &bench))
+        .collect();
+    let mut planner = Planner::new(config, d).unwrap();
+    let limp_ref: lhm_sim::plan::Prior = &limp;
+    let corrected = steps_up(&mut env, steps, |env| {
+        let a = planner.act_around(env, &mut workers, Some(limp_ref));
+        assert!(a.iter().all(|x| (-1.0..=1.0).contains(x)));
+        a
+    });
+    assert_eq!(
+        corrected, steps,
+        "around the prior the planner fell after {corrected} steps (the prior alone: {alone})"
+    );
+}
