@@ -25,6 +25,11 @@
 //! `STAND_HEIGHT`, `TILT_COST`, `POSE_COST`, `DECAY`, `TEMPERATURE`; `PLAN_DOFS=legs` plans hips, knees,
 //! ankles and abdomen only (arms, neck keep the base's targets). Prints per task: control steps up, reached,
 //! stopped, the root's speed at the end, wall time; then the totals.
+//!
+//! `SPREAD=K`: every `SPREAD_EVERY` (50) control steps, the decision is also taken by K copies of
+//! the planner (same plan, other noise seeds) from the same state, and the probe prints, over the
+//! planned DoFs, the RMS spread of their actions across seeds (how much a label is the draw) and
+//! the RMS of their mean minus the nominal plan's action (the correction the state calls for).
 
 use std::time::Instant;
 
@@ -64,6 +69,28 @@ struct Problem<'a> {
     /// DoFs whose names contain one of these are planned (`PLAN_DOFS=legs`: hips, knees, ankles,
     /// abdomen; default: all).
     planned_prefixes: Vec<String>,
+    /// `SPREAD`, `SPREAD_EVERY`: see the header.
+    spread: usize,
+    spread_every: usize,
+}
+
+/// The decision at `env` taken by `k` reseeded copies of `planner`: the RMS over planned DoFs of
+/// the actions' standard deviation across seeds, and of their mean minus the nominal action.
+fn label_spread(planner: &Planner, env: &TaskEnv, workers: &mut [TaskEnv], k: usize) -> (f32, f32) {
+    let actions: Vec<Vec<f32>> = (0..k)
+        .map(|i| planner.reseeded(0xabcd + i as u64).act(env, workers))
+        .collect();
+    let nominal = planner.nominal_action();
+    let (mut var, mut corr, mut dofs) = (0.0f32, 0.0f32, 0usize);
+    for j in (0..nominal.len()).filter(|&j| planner.planned()[j]) {
+        let mean = actions.iter().map(|a| a[j]).sum::<f32>() / k as f32;
+        var += actions.iter().map(|a| (a[j] - mean).powi(2)).sum::<f32>()
+            / k.max(2).saturating_sub(1) as f32;
+        corr += (mean - nominal[j]).powi(2);
+        dofs += 1;
+    }
+    let dofs = dofs.max(1) as f32;
+    ((var / dofs).sqrt(), (corr / dofs).sqrt())
 }
 
 impl Problem<'_> {
@@ -116,6 +143,14 @@ impl Problem<'_> {
         let mut up = 0;
         let (mut sq, mut n) = (0.0f32, 0usize);
         for t in 0..steps {
+            if self.spread > 0 && t % self.spread_every.max(1) == 0 {
+                let (spread, correction) = label_spread(&planner, &env, &mut workers, self.spread);
+                println!(
+                    "  step {t}: label spread across {} seeds {spread:.3} RMS per planned DoF, \
+                     mean correction {correction:.3} (σ {})",
+                    self.spread, self.planner.sigma
+                );
+            }
             let action = planner.act(&env, &mut workers);
             sq += action.iter().map(|a| a * a).sum::<f32>();
             n += action.len();
@@ -179,8 +214,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ..GaitConfig::default()
         });
     }
-    let home = std::env::var("HOME").unwrap_or_default();
-    let dir = std::path::PathBuf::from(home).join(".cache/lhm/motions");
+    let dir = lhm_sim::motion::default_dir();
     let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&config, &sim))?;
     let reference = match &config.gait {
         Some(g) => Some(std::sync::Arc::new(reference_for(
@@ -219,6 +253,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .to_vec(),
             _ => vec![String::new()],
         },
+        spread: var("SPREAD", 0usize),
+        spread_every: var("SPREAD_EVERY", 50usize),
     };
     let gif = std::env::var("GIF").ok();
     let (mut up_all, mut reached, mut stood) = (0, 0, 0);

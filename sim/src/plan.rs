@@ -198,6 +198,20 @@ impl Planner {
         &self.planned
     }
 
+    /// The nominal plan's first action: what the planner does next if no sample beats it.
+    pub fn nominal_action(&self) -> &[f32] {
+        &self.nominal[..self.act_dim]
+    }
+
+    /// The same planner (same plan) drawing its noise from `seed`: for measuring how much a
+    /// decision depends on the draw rather than on the state and the plan.
+    pub fn reseeded(&self, seed: u64) -> Self {
+        Self {
+            noise: Noise(seed),
+            ..self.clone()
+        }
+    }
+
     /// Plans from `env`'s current state and returns the action to take now; `workers` are
     /// environments of the same task and configuration (at least one) that the rollouts run in.
     /// Afterwards the plan is shifted by a step: call once per control step.
