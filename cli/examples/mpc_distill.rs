@@ -7,11 +7,14 @@
 //! scored on unseen tasks: control steps up, objects reached, episodes up to the end — against
 //! the gait base alone. The student is saved as a `lhm train` policy checkpoint with the run's
 //! config, so `lhm render-rollout --policy OUT/policy --config OUT/config.toml` plays it and
-//! `lhm train --init-from OUT/policy` fine-tunes it.
+//! `lhm train --init-from OUT/policy` fine-tunes it. `--prior` plans around the student instead
+//! (PLATO: the labels are the student's actions corrected).
 //!
 //! `cargo run --release -p lhm-cli --example mpc_distill -- --config FILE --out DIR`
 //! (the config must have `[env.gait]`; the planner's settings are `PlannerConfig::default()` but
-//! for `--samples`/`--horizon`).
+//! for `--samples`, `--horizon`, `--decay`, `--temperature`, `--threads`). With `--parallel` above
+//! 1 on a many-core machine, set `RAYON_NUM_THREADS=1`: the student's one-row products otherwise
+//! may fan out over every core from every planner thread.
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -246,15 +249,7 @@ fn collect_episode(
     let mut workers: Vec<TaskEnv> = (0..planner.config.threads)
         .map(|_| s.env(spec.task))
         .collect();
-    let mut planner = Planner::new(
-        PlannerConfig {
-            seed: spec.planner_seed,
-            ..planner.config.clone()
-        },
-        student.config.act_dim,
-    )
-    .and_then(|p| p.with_planned(planner.planned().to_vec()))
-    .map_err(anyhow::Error::msg)?;
+    let mut planner = planner.reseeded(spec.planner_seed);
     // The prior cannot return an error through the planner: a failed inference is recorded
     // and ends the episode with that error below.
     let failure = std::sync::Mutex::new(None::<String>);
@@ -303,8 +298,8 @@ fn collect_episode(
     Ok(episode)
 }
 
-fn main() -> Result<()> {
-    let args = Args::parse();
+/// The config, clips, gait reference and benchmark the run needs.
+fn load_setup(args: &Args) -> Result<Setup> {
     let train = TrainConfig::from_toml_file(&args.config)?;
     let Some(gait) = train.env.gait.clone() else {
         bail!(
@@ -320,13 +315,44 @@ fn main() -> Result<()> {
         reference_for(&model, &demo, &gait.clip, 1.0 / train.sim.control_hz)
             .map_err(anyhow::Error::msg)?,
     );
-    let setup = Setup {
+    Ok(Setup {
         model,
         bench: Benchmark::embedded()?,
         demo,
         reference,
         train,
+    })
+}
+
+/// A fresh planner with the run's settings, planning all DoFs or (`--legs-only`) hips, knees,
+/// ankles and abdomen.
+fn planner_template(args: &Args, model: &CharacterModel, act_dim: usize) -> Result<Planner> {
+    let config = PlannerConfig {
+        samples: args.samples,
+        horizon: args.horizon,
+        decay: args.decay,
+        temperature: args.temperature,
+        threads: args.threads,
+        ..PlannerConfig::default()
     };
+    let planned: Vec<bool> = model
+        .dofs
+        .iter()
+        .map(|d| {
+            !args.legs_only
+                || ["hip", "knee", "ankle", "abdomen"]
+                    .iter()
+                    .any(|p| d.name.contains(p))
+        })
+        .collect();
+    Planner::new(config, act_dim)
+        .and_then(|p| p.with_planned(planned))
+        .map_err(anyhow::Error::msg)
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    let setup = load_setup(&args)?;
     let mut learner = Learner::new(setup.train.learner_config())?;
     let (obs_dim, act_dim) = (learner.config.obs_dim, learner.config.act_dim);
     std::fs::create_dir_all(&args.out)?;
@@ -342,28 +368,7 @@ fn main() -> Result<()> {
         },
         &learner.actor_critic,
     )?;
-    let planner_config = PlannerConfig {
-        samples: args.samples,
-        horizon: args.horizon,
-        decay: args.decay,
-        temperature: args.temperature,
-        threads: args.threads,
-        ..PlannerConfig::default()
-    };
-    let planned: Vec<bool> = setup
-        .model
-        .dofs
-        .iter()
-        .map(|d| {
-            !args.legs_only
-                || ["hip", "knee", "ankle", "abdomen"]
-                    .iter()
-                    .any(|p| d.name.contains(p))
-        })
-        .collect();
-    let template = Planner::new(planner_config, act_dim)
-        .and_then(|p| p.with_planned(planned))
-        .map_err(anyhow::Error::msg)?;
+    let template = planner_template(&args, &setup.model, act_dim)?;
     let mut rng = SplitMix64::new(args.seed);
     let tasks = setup.bench.tasks(Split::Train);
     for stand in [false, true] {

@@ -59,6 +59,13 @@ struct Args {
     report_s: f64,
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Stop updating the observation normaliser after this many environment steps (0: never
+    /// stop): critics whose inputs keep shifting under them can diverge.
+    #[arg(long, default_value_t = 0)]
+    freeze_norm_after: usize,
+    /// Hidden widths of the actor and both critics (default: SAC's 256-256).
+    #[arg(long, value_delimiter = ',')]
+    hidden: Option<Vec<usize>>,
     /// CSV file the report rows are appended to.
     #[arg(long)]
     out: Option<std::path::PathBuf>,
@@ -72,6 +79,16 @@ struct Window {
     reached: u64,
     reward: f64,
     steps: u64,
+}
+
+/// SAC's defaults with the actor's and critics' hidden widths replaced where given.
+fn sac_config(hidden: Option<&[usize]>) -> SacConfig {
+    let mut config = SacConfig::default();
+    if let Some(h) = hidden {
+        config.actor.hidden = h.to_vec();
+        config.critic.hidden = h.to_vec();
+    }
+    config
 }
 
 fn main() -> Result<()> {
@@ -111,7 +128,7 @@ fn main() -> Result<()> {
             log_std_min: args.log_std_min,
             log_std_max: args.log_std_max,
             seed: args.seed,
-            ..SacConfig::default()
+            ..sac_config(args.hidden.as_deref())
         },
     )?;
     let mut replay = SacReplay::new(args.replay, obs_dim, act_dim);
@@ -138,7 +155,9 @@ fn main() -> Result<()> {
     let mut last_report = 0.0;
     let mut obs: Vec<f32> = envs.iter().flat_map(|e| e.observation()).collect();
     while start.elapsed().as_secs_f64() < args.minutes * 60.0 {
-        sac.observe(&obs)?;
+        if args.freeze_norm_after == 0 || env_steps < args.freeze_norm_after {
+            sac.observe(&obs)?;
+        }
         let actions = sac.act(&obs, true)?;
         let mut next_obs = Vec::with_capacity(obs.len());
         for (k, env) in envs.iter_mut().enumerate() {
