@@ -66,6 +66,13 @@ struct Args {
     /// Hidden widths of the actor and both critics (default: SAC's 256-256).
     #[arg(long, value_delimiter = ',')]
     hidden: Option<Vec<usize>>,
+    /// The actor's learning rate (default: SAC's 3e-4). 0 freezes the actor, so the critics
+    /// evaluate one fixed policy — its own data — and `mean_q` can be held against `mc_return`.
+    #[arg(long)]
+    actor_lr: Option<f64>,
+    /// The actor steps once every this many critic steps (TD3's delayed policy updates).
+    #[arg(long, default_value_t = 1)]
+    actor_every: usize,
     /// CSV file the report rows are appended to.
     #[arg(long)]
     out: Option<std::path::PathBuf>,
@@ -79,11 +86,31 @@ struct Window {
     reached: u64,
     reward: f64,
     steps: u64,
+    /// Discounted returns-to-go (scaled reward) summed over every step of the finished episodes:
+    /// the Monte-Carlo value of the states visited, to hold the critics' `mean_q` against (a
+    /// lower bound for episodes cut by the time limit).
+    mc_sum: f64,
+    mc_steps: u64,
 }
 
-/// SAC's defaults with the actor's and critics' hidden widths replaced where given.
-fn sac_config(hidden: Option<&[usize]>) -> SacConfig {
+/// The discounted returns-to-go of one episode's rewards.
+fn returns_to_go(rewards: &[f32], gamma: f64) -> Vec<f64> {
+    let mut out = vec![0.0; rewards.len()];
+    let mut g = 0.0;
+    for (t, r) in rewards.iter().enumerate().rev() {
+        g = f64::from(*r) + gamma * g;
+        out[t] = g;
+    }
+    out
+}
+
+/// SAC's defaults with the actor's and critics' hidden widths and the actor's learning rate
+/// replaced where given.
+fn sac_config(hidden: Option<&[usize]>, actor_lr: Option<f64>) -> SacConfig {
     let mut config = SacConfig::default();
+    if let Some(lr) = actor_lr {
+        config.actor_adam.lr = lr;
+    }
     if let Some(h) = hidden {
         config.actor.hidden = h.to_vec();
         config.critic.hidden = h.to_vec();
@@ -128,14 +155,15 @@ fn main() -> Result<()> {
             log_std_min: args.log_std_min,
             log_std_max: args.log_std_max,
             seed: args.seed,
-            ..sac_config(args.hidden.as_deref())
+            actor_every: args.actor_every,
+            ..sac_config(args.hidden.as_deref(), args.actor_lr)
         },
     )?;
     let mut replay = SacReplay::new(args.replay, obs_dim, act_dim);
     let mut out = match &args.out {
         Some(p) => {
             let mut f = std::fs::File::create(p).with_context(|| format!("{}", p.display()))?;
-            writeln!(f, "wall_s,env_steps,updates,episodes,mean_length,fall_fraction,reach_rate,reward_per_step,alpha,entropy,critic_loss,mean_q")?;
+            writeln!(f, "wall_s,env_steps,updates,episodes,mean_length,fall_fraction,reach_rate,reward_per_step,alpha,entropy,critic_loss,mean_q,mc_return")?;
             Some(f)
         }
         None => None,
@@ -154,6 +182,7 @@ fn main() -> Result<()> {
     let mut stats = SacStats::default();
     let mut last_report = 0.0;
     let mut obs: Vec<f32> = envs.iter().flat_map(|e| e.observation()).collect();
+    let mut episode_rewards: Vec<Vec<f32>> = vec![Vec::new(); envs.len()];
     while start.elapsed().as_secs_f64() < args.minutes * 60.0 {
         if args.freeze_norm_after == 0 || env_steps < args.freeze_norm_after {
             sac.observe(&obs)?;
@@ -165,6 +194,7 @@ fn main() -> Result<()> {
             let r = env.step(a);
             window.reward += f64::from(r.reward);
             window.steps += 1;
+            episode_rewards[k].push(r.reward * args.reward_scale);
             let after = env.observation();
             if !r.physics_invalid {
                 replay.push(
@@ -180,6 +210,11 @@ fn main() -> Result<()> {
                 window.length += u64::from(env.steps());
                 window.falls += u64::from(r.fell);
                 window.reached += u64::from(env.reached);
+                let rewards = std::mem::take(&mut episode_rewards[k]);
+                window.mc_sum += returns_to_go(&rewards, sac.config.gamma)
+                    .iter()
+                    .sum::<f64>();
+                window.mc_steps += rewards.len() as u64;
                 *env = new_env(&mut rng);
                 next_obs.extend(env.observation());
             } else {
@@ -202,7 +237,7 @@ fn main() -> Result<()> {
             last_report = t;
             let e = window.episodes.max(1) as f64;
             let row = format!(
-                "{t:.0},{env_steps},{updates},{},{:.1},{:.3},{:.3},{:.4},{:.4},{:.2},{:.4},{:.3}",
+                "{t:.0},{env_steps},{updates},{},{:.1},{:.3},{:.3},{:.4},{:.4},{:.2},{:.4},{:.3},{:.3}",
                 window.episodes,
                 window.length as f64 / e,
                 window.falls as f64 / e,
@@ -211,7 +246,8 @@ fn main() -> Result<()> {
                 stats.alpha,
                 stats.entropy,
                 stats.critic_loss,
-                stats.mean_q
+                stats.mean_q,
+                window.mc_sum / window.mc_steps.max(1) as f64
             );
             println!("{row}");
             if let Some(f) = out.as_mut() {

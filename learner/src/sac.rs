@@ -38,6 +38,10 @@ pub struct SacConfig {
     pub log_std_max: f64,
     /// Normalise observations with running statistics of everything `observe`d.
     pub normalize_obs: bool,
+    /// The actor and the temperature step once every this many critic steps (TD3's delayed
+    /// policy updates, Fujimoto et al. 2018: the actor chases a critic that has had time to
+    /// settle; 1: every step, as in SAC).
+    pub actor_every: usize,
     pub seed: u64,
 }
 
@@ -67,6 +71,7 @@ impl Default for SacConfig {
             log_std_min: -5.0,
             log_std_max: 2.0,
             normalize_obs: true,
+            actor_every: 1,
             seed: 0,
         }
     }
@@ -113,6 +118,8 @@ pub struct Sac {
     target_vars: Vec<Var>,
     pub obs_norm: RunningMeanStd,
     rng: SplitMix64,
+    /// Critic steps taken (the actor steps on every `actor_every`-th).
+    critic_steps: u64,
 }
 
 /// target ← (1 − τ) target + τ source, parameter by parameter (τ = 1 copies).
@@ -130,6 +137,11 @@ impl Sac {
                 "sac: tau must lie in (0, 1] and batch_size be positive (tau {}, batch_size {})",
                 config.tau, config.batch_size
             )));
+        }
+        if config.actor_every == 0 {
+            return Err(LearnerError::Invalid(
+                "sac: actor_every must be at least 1".into(),
+            ));
         }
         if config.initial_alpha.is_nan()
             || config.initial_alpha <= 0.0
@@ -163,6 +175,7 @@ impl Sac {
         Ok(Self {
             obs_norm: RunningMeanStd::new(obs_dim),
             rng: SplitMix64::new(config.seed ^ 0x5ac),
+            critic_steps: 0,
             config,
             obs_dim,
             act_dim,
@@ -301,15 +314,18 @@ impl Sac {
         let (action, log_prob) = self.sample(&x)?;
         let q = Self::q_min(&self.q1, &self.q2, &x, &action)?;
         let actor_loss = ((&log_prob * alpha)? - &q)?.mean_all()?;
-        let grads = gradients(&self.actor_vars, &actor_loss.backward()?)?;
-        self.actor_adam.step(&self.actor_vars, &grads)?;
-
-        // Temperature: d/d log α of −log α · (log π + H̄) is −(mean log π + H̄).
         let mean_log_prob = scalar(&log_prob.mean_all()?)?;
-        let target_entropy = self.config.target_entropy_per_dim * self.act_dim as f64;
-        let g = -(mean_log_prob + target_entropy) as f32;
-        self.alpha_adam
-            .step(std::slice::from_ref(&self.log_alpha), &[vec![g]])?;
+        self.critic_steps += 1;
+        if (self.critic_steps - 1) % self.config.actor_every as u64 == 0 {
+            let grads = gradients(&self.actor_vars, &actor_loss.backward()?)?;
+            self.actor_adam.step(&self.actor_vars, &grads)?;
+
+            // Temperature: d/d log α of −log α · (log π + H̄) is −(mean log π + H̄).
+            let target_entropy = self.config.target_entropy_per_dim * self.act_dim as f64;
+            let g = -(mean_log_prob + target_entropy) as f32;
+            self.alpha_adam
+                .step(std::slice::from_ref(&self.log_alpha), &[vec![g]])?;
+        }
 
         polyak(&self.target_vars, &self.critic_vars, self.config.tau)?;
         Ok(SacStats {
@@ -526,8 +542,40 @@ mod tests {
                 initial_alpha: -1.0,
                 ..SacConfig::default()
             },
+            SacConfig {
+                actor_every: 0,
+                ..SacConfig::default()
+            },
         ] {
             assert!(Sac::new(2, 1, config).is_err());
         }
+    }
+
+    /// With `actor_every` 3 the actor moves on critic steps 1, 4, 7, … and on no other.
+    #[test]
+    fn a_delayed_actor_steps_once_every_actor_every_updates() {
+        let config = SacConfig {
+            actor: MlpConfig::with_hidden(&[8]),
+            critic: MlpConfig::with_hidden(&[8]),
+            batch_size: 8,
+            actor_every: 3,
+            normalize_obs: false,
+            ..SacConfig::default()
+        };
+        let mut sac = Sac::new(2, 1, config).unwrap();
+        let mut replay = SacReplay::new(100, 2, 1);
+        let mut rng = SplitMix64::new(3);
+        for k in 0..20 {
+            let o = [k as f32 * 0.1, 0.5];
+            replay.push(&o, &[0.3], 1.0, &o, false).unwrap();
+        }
+        let probe = [0.2f32, 0.4];
+        let mut moved = Vec::new();
+        for _ in 0..7 {
+            let before = sac.act(&probe, false).unwrap();
+            sac.update(&replay.sample(8, &mut rng)).unwrap();
+            moved.push(sac.act(&probe, false).unwrap() != before);
+        }
+        assert_eq!(moved, [true, false, false, true, false, false, true]);
     }
 }
