@@ -70,6 +70,9 @@ struct Args {
     /// evaluate one fixed policy — its own data — and `mean_q` can be held against `mc_return`.
     #[arg(long)]
     actor_lr: Option<f64>,
+    /// The entropy temperature's starting value (SAC's default: 0.2).
+    #[arg(long)]
+    initial_alpha: Option<f64>,
     /// The actor steps once every this many critic steps (TD3's delayed policy updates).
     #[arg(long, default_value_t = 1)]
     actor_every: usize,
@@ -156,6 +159,9 @@ fn main() -> Result<()> {
             log_std_max: args.log_std_max,
             seed: args.seed,
             actor_every: args.actor_every,
+            initial_alpha: args
+                .initial_alpha
+                .unwrap_or(SacConfig::default().initial_alpha),
             ..sac_config(args.hidden.as_deref(), args.actor_lr)
         },
     )?;
