@@ -96,27 +96,36 @@ struct Window {
     mc_steps: u64,
 }
 
-/// The discounted returns-to-go of one episode's rewards.
-fn returns_to_go(rewards: &[f32], gamma: f64) -> Vec<f64> {
-    let mut out = vec![0.0; rewards.len()];
+/// The sum over an episode's steps of the discounted return-to-go from each.
+fn returns_to_go_sum(rewards: &[f32], gamma: f64) -> f64 {
     let mut g = 0.0;
-    for (t, r) in rewards.iter().enumerate().rev() {
+    let mut sum = 0.0;
+    for r in rewards.iter().rev() {
         g = f64::from(*r) + gamma * g;
-        out[t] = g;
+        sum += g;
     }
-    out
+    sum
 }
 
-/// SAC's defaults with the actor's and critics' hidden widths and the actor's learning rate
-/// replaced where given.
-fn sac_config(hidden: Option<&[usize]>, actor_lr: Option<f64>) -> SacConfig {
-    let mut config = SacConfig::default();
-    if let Some(lr) = actor_lr {
+/// SAC's defaults with the probe's options applied.
+fn sac_config(args: &Args) -> SacConfig {
+    let mut config = SacConfig {
+        target_entropy_per_dim: args.target_entropy,
+        log_std_min: args.log_std_min,
+        log_std_max: args.log_std_max,
+        actor_every: args.actor_every,
+        seed: args.seed,
+        ..SacConfig::default()
+    };
+    if let Some(lr) = args.actor_lr {
         config.actor_adam.lr = lr;
     }
-    if let Some(h) = hidden {
-        config.actor.hidden = h.to_vec();
-        config.critic.hidden = h.to_vec();
+    if let Some(alpha) = args.initial_alpha {
+        config.initial_alpha = alpha;
+    }
+    if let Some(h) = &args.hidden {
+        config.actor.hidden = h.clone();
+        config.critic.hidden = h.clone();
     }
     config
 }
@@ -150,21 +159,7 @@ fn main() -> Result<()> {
     let mut envs: Vec<TaskEnv> = (0..args.envs).map(|_| new_env(&mut rng)).collect();
     let obs_dim = TaskEnv::obs_dim(&model, &env_config);
     let act_dim = model.dofs.len();
-    let mut sac = Sac::new(
-        obs_dim,
-        act_dim,
-        SacConfig {
-            target_entropy_per_dim: args.target_entropy,
-            log_std_min: args.log_std_min,
-            log_std_max: args.log_std_max,
-            seed: args.seed,
-            actor_every: args.actor_every,
-            initial_alpha: args
-                .initial_alpha
-                .unwrap_or(SacConfig::default().initial_alpha),
-            ..sac_config(args.hidden.as_deref(), args.actor_lr)
-        },
-    )?;
+    let mut sac = Sac::new(obs_dim, act_dim, sac_config(&args))?;
     let mut replay = SacReplay::new(args.replay, obs_dim, act_dim);
     let mut out = match &args.out {
         Some(p) => {
@@ -217,9 +212,7 @@ fn main() -> Result<()> {
                 window.falls += u64::from(r.fell);
                 window.reached += u64::from(env.reached);
                 let rewards = std::mem::take(&mut episode_rewards[k]);
-                window.mc_sum += returns_to_go(&rewards, sac.config.gamma)
-                    .iter()
-                    .sum::<f64>();
+                window.mc_sum += returns_to_go_sum(&rewards, sac.config.gamma);
                 window.mc_steps += rewards.len() as u64;
                 *env = new_env(&mut rng);
                 next_obs.extend(env.observation());

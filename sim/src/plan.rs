@@ -307,7 +307,7 @@ impl Planner {
                     scope.spawn(move || {
                         chunk
                             .iter()
-                            .map(|plan| plan_cost_around(worker, snapshot, plan, config, prior))
+                            .map(|plan| plan_cost(worker, snapshot, plan, config, prior))
                             .collect::<Vec<f32>>()
                     })
                 })
@@ -363,17 +363,6 @@ pub fn posture_cost(env: &TaskEnv, c: &PlannerConfig) -> f32 {
     c.height_cost * low + c.tilt_cost * tilt + c.pose_cost * pose
 }
 
-/// Cost of rolling `plan` (horizon × action dim) out of `snapshot` in `env`: minus the
-/// environment's reward, a fall's cost, the speed cost while stopping, the effort.
-pub fn plan_cost(
-    env: &mut TaskEnv,
-    snapshot: &EnvSnapshot,
-    plan: &[f32],
-    c: &PlannerConfig,
-) -> f32 {
-    plan_cost_around(env, snapshot, plan, c, None)
-}
-
 /// `a += b` within [-1, 1] (the action range).
 fn add_clamped(a: &mut [f32], b: &[f32]) {
     for (x, y) in a.iter_mut().zip(b) {
@@ -381,8 +370,10 @@ fn add_clamped(a: &mut [f32], b: &[f32]) {
     }
 }
 
-/// [`plan_cost`] with the plan as corrections to `prior`'s actions, closed loop.
-pub fn plan_cost_around(
+/// Cost of rolling `plan` (horizon × action dim) out of `snapshot` in `env`: minus the
+/// environment's reward, a fall's cost, the speed cost while stopping, the effort. With a
+/// `prior`, each step's action is the prior's (closed loop) plus the plan's.
+pub fn plan_cost(
     env: &mut TaskEnv,
     snapshot: &EnvSnapshot,
     plan: &[f32],
