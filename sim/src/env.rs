@@ -2,7 +2,7 @@
 //! task — observations, reward terms, terminations, cycle switching and the AMP history — wired
 //! together. Each piece stays a small pure function in `obs` and `task`.
 
-use crate::gait::{base_targets, steer, BalanceGains, GaitReference, Rig};
+use crate::gait::{aligned_to, base_targets, steer, BalanceGains, GaitReference, Rig};
 use crate::mjcf::{CharacterModel, JointKind};
 use crate::motion::demo::DemoMotion;
 use crate::motion::retarget::KinematicPose;
@@ -39,6 +39,10 @@ pub struct EnvConfig {
     /// The root (pelvis) below this height (m) is a fall too (early termination as in the AMP
     /// anchors: fallen frames never reach the discriminator).
     pub root_fall_height: f32,
+    /// The pelvis, torso or head pressing on furniture or a wall is a fall too: a character
+    /// lying across a stool is not up, though the height rules above say so (the fourteenth
+    /// session's planner stayed "up" 20 s that way).
+    pub fall_on_furniture: bool,
     /// An episode "reached" its object once the root came this close (m, horizontally).
     pub reach_distance: f32,
     /// Probability that an episode starts from a reference-motion frame (reference-state
@@ -76,6 +80,23 @@ pub struct EnvConfig {
     /// residual on the base's PD targets. The policy reads the gait's phase (sin, cos) after the
     /// obstacle map (and the skill, if any).
     pub gait: Option<GaitConfig>,
+    /// Flat empty ground ([`empty_room`]): the task's furniture removed, its walls 30 m away and
+    /// its objects 25 m further along x. A training aid for the character's own balance (the
+    /// walk's falls without the room's), as the anchors pretrain locomotion on flat ground; the
+    /// task's reach and placement terms then measure nothing.
+    pub empty_room: bool,
+}
+
+/// The room of `task` emptied ([`EnvConfig::empty_room`]): no furniture, walls at ±30 m, every
+/// object moved 25 m along +x (a heading toward the first object stays a heading).
+pub fn empty_room(task: &Task) -> Task {
+    let mut task = task.clone();
+    task.obstacles.clear();
+    task.room_size = [60.0, 60.0];
+    for o in &mut task.objects {
+        o.pos[0] += 25.0;
+    }
+    task
 }
 
 /// `[env.gait]`: the residual base.
@@ -138,6 +159,7 @@ impl Default for EnvConfig {
             map_cell: 0.25,
             fall_height: 0.15,
             root_fall_height: 0.4,
+            fall_on_furniture: true,
             reach_distance: 0.6,
             demo_start_probability: 0.0,
             demo_start_toward_object: 0.0,
@@ -150,6 +172,7 @@ impl Default for EnvConfig {
             imitation_seconds: 3.0,
             skills: None,
             gait: None,
+            empty_room: false,
         }
     }
 }
@@ -228,6 +251,8 @@ pub struct TaskEnv {
     /// Footprints and heights of the static obstacles, for the obstacle map.
     obstacles: Vec<(Rect, f32)>,
     exempt: Vec<bool>,
+    /// Pelvis, torso and head: resting on furniture is a fall (`fall_on_furniture`).
+    trunk: Vec<usize>,
     hands: [usize; 2],
     /// Height of each object at its start, for the lift term.
     start_z: Vec<f32>,
@@ -270,6 +295,13 @@ impl TaskEnv {
         sim: SimConfig,
         config: EnvConfig,
     ) -> Self {
+        let emptied;
+        let task = if config.empty_room {
+            emptied = empty_room(task);
+            &emptied
+        } else {
+            task
+        };
         let world = World::with_task(model, sim, task, catalogue);
         let exempt = fall_exempt(model);
         let hands = [
@@ -292,6 +324,10 @@ impl TaskEnv {
                 .map(|o| (obstacle_rect(o), o.size[2] as f32))
                 .collect(),
             exempt,
+            trunk: ["pelvis", "torso", "head"]
+                .iter()
+                .filter_map(|name| model.body_index(name))
+                .collect(),
             hands,
             start_z: task.objects.iter().map(|o| o.pos[2] as f32).collect(),
             config,
@@ -674,10 +710,7 @@ impl TaskEnv {
         let mut terms = RewardTerms {
             power: self.power(&bodies, &targets),
             assist: rewards::assist_effort(self.world.assist_torque, self.world.assist_force),
-            imitation: self
-                .reference
-                .get(self.steps as usize - 1)
-                .map_or(0.0, |r| rewards::imitation(&bodies, r, &self.end_effectors)),
+            imitation: self.imitation(&bodies),
             ..RewardTerms::default()
         };
         let mut handoff = Handoff::Done;
@@ -717,7 +750,8 @@ impl TaskEnv {
         }
         let heights: Vec<f32> = bodies.iter().map(|b| b.pos.z).collect();
         let fell = fallen(&heights, &self.exempt, self.config.fall_height)
-            || bodies[0].pos.z < self.config.root_fall_height;
+            || bodies[0].pos.z < self.config.root_fall_height
+            || (self.config.fall_on_furniture && self.trunk_on_furniture());
         terms.alive = if fell { 0.0 } else { 1.0 };
         let mut weights = self.config.weights;
         let mut skill_ended = false;
@@ -747,6 +781,37 @@ impl TaskEnv {
             weights,
             skill_ended,
         }
+    }
+
+    /// Whether the pelvis, torso or head presses on furniture or a wall.
+    fn trunk_on_furniture(&self) -> bool {
+        let touching = self.world.furniture_contacts();
+        self.trunk
+            .iter()
+            .any(|&b| touching.get(b).copied().unwrap_or(false))
+    }
+
+    /// The imitation term after a step. While a gait walks: its reference's frame for now, moved
+    /// onto the character's heading and ground position ([`aligned_to`]), so the walk is tracked
+    /// wherever the steering took it (DeepMimic's phase-indexed target, DReCon's kinematic
+    /// reference). Otherwise the demo start's track, in the world. 0 when the weight is 0.
+    fn imitation(&self, bodies: &[BodyState]) -> f32 {
+        if self.config.weights.imitation == 0.0 {
+            return 0.0;
+        }
+        if let Some(run) = self.gait.as_ref() {
+            if run.stopped {
+                return 0.0;
+            }
+            let Some(root) = bodies.first() else {
+                return 0.0;
+            };
+            let target = aligned_to(run.reference.at(run.step).0, root);
+            return rewards::imitation(bodies, &target, &self.end_effectors);
+        }
+        self.reference
+            .get(self.steps as usize - 1)
+            .map_or(0.0, |r| rewards::imitation(bodies, r, &self.end_effectors))
     }
 
     /// PD torques the servos apply (from the same error the drive uses), times joint velocities.

@@ -238,6 +238,35 @@ pub fn balance_about(rig: &Rig, states: &[BodyState], anchor: Vector) -> Balance
     }
 }
 
+/// `frame` moved by the rigid motion in the ground plane (a turn about the vertical and a
+/// horizontal shift) that takes its root's heading and ground position onto `onto`'s: the
+/// reference as it would be had it walked where the character walks. Heights, tilts and
+/// everything relative to the root are kept, so tracking it ([`crate::task::rewards::imitation`])
+/// asks for the reference's posture and speed whatever course the steering took.
+pub fn aligned_to(frame: &[BodyState], onto: &BodyState) -> Vec<BodyState> {
+    let Some(root) = frame.first() else {
+        return Vec::new();
+    };
+    let yaw = |r: &BodyState| {
+        let f = r.rot * Vector::X;
+        f.y.atan2(f.x)
+    };
+    let turn = Rotation::from_rotation_z(yaw(onto) - yaw(root));
+    let (from, to) = (
+        Vector::new(root.pos.x, root.pos.y, 0.0),
+        Vector::new(onto.pos.x, onto.pos.y, 0.0),
+    );
+    frame
+        .iter()
+        .map(|b| BodyState {
+            pos: to + turn * (b.pos - from),
+            rot: (turn * b.rot).normalize(),
+            linvel: turn * b.linvel,
+            angvel: turn * b.angvel,
+        })
+        .collect()
+}
+
 /// PD targets (radians, one per DoF): the reference's next joint angles `reference_next` with the
 /// feedback of `gains` for the character in `now` against the reference in `reference_now`.
 pub fn base_targets(

@@ -425,6 +425,34 @@ impl World {
         }
     }
 
+    /// Per model body, whether it pressed on a piece of furniture or a wall (a contact with a
+    /// positive impulse in the last pipeline step). Model bodies welded to one rigid body share
+    /// its contacts. Objects and the floor are not furniture.
+    pub fn furniture_contacts(&self) -> Vec<bool> {
+        let mut touching = vec![false; self.character.bodies.len()];
+        let furniture = self.room.obstacles.iter().chain(self.room.walls.as_ref());
+        for body in furniture.filter_map(|h| self.state.bodies.get(*h)) {
+            for &c in body.colliders() {
+                for pair in self.state.narrow_phase.contact_pairs_with(c) {
+                    let pressed = pair
+                        .manifolds()
+                        .iter()
+                        .any(|m| m.points.iter().any(|p| p.data.impulse > 0.0));
+                    let other = if pair.collider1 == c {
+                        pair.collider2
+                    } else {
+                        pair.collider1
+                    };
+                    let parent = self.state.colliders.get(other).and_then(|o| o.parent());
+                    for (k, h) in self.character.bodies.iter().enumerate() {
+                        touching[k] |= pressed && parent == Some(*h);
+                    }
+                }
+            }
+        }
+        touching
+    }
+
     pub fn root_height(&self) -> f32 {
         self.body_pose(0).translation.z
     }

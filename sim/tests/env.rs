@@ -254,3 +254,65 @@ fn under_the_skill_machine_each_step_pays_the_acting_skill_and_a_skill_ends_when
     assert!(handed_off, "the placed pair never handed off");
     assert_eq!(env.current_skill(), Some(Skill::Walk));
 }
+
+/// The character lying on its back across the task's tallest piece of furniture, 10 cm above
+/// its top, at rest.
+fn lying_on_furniture(env: &mut TaskEnv, model: &CharacterModel) {
+    use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
+    use lhm_sim::obs::BodyState;
+    let top = env
+        .task
+        .obstacles
+        .iter()
+        .max_by(|a, b| a.size[2].total_cmp(&b.size[2]))
+        .expect("the task has furniture")
+        .clone();
+    assert!(top.size[2] > 0.4, "{top:?}");
+    let pose = KinematicPose {
+        root_pos: Vector::new(
+            top.pos[0] as f32,
+            top.pos[1] as f32,
+            top.size[2] as f32 + 0.2,
+        ),
+        root_rot: Rotation::from_rotation_y(-std::f32::consts::FRAC_PI_2),
+        local_rots: vec![Rotation::IDENTITY; model.bodies.len()],
+    };
+    let states: Vec<BodyState> = forward_kinematics(model, &pose)
+        .into_iter()
+        .map(|(pos, rot)| BodyState {
+            pos,
+            rot,
+            linvel: Vector::ZERO,
+            angvel: Vector::ZERO,
+        })
+        .collect();
+    env.world.set_character_state(&pose, &states);
+}
+
+#[test]
+fn lying_across_furniture_is_a_fall_though_every_body_is_high() {
+    let (model, mut on) = setup(EnvConfig::default());
+    let (_, mut off) = setup(EnvConfig {
+        fall_on_furniture: false,
+        ..EnvConfig::default()
+    });
+    lying_on_furniture(&mut on, &model);
+    lying_on_furniture(&mut off, &model);
+    let zero = vec![0.0; model.dofs.len()];
+    let fell_at = (1..=15).find(|_| on.step(&zero).fell);
+    let Some(k) = fell_at else {
+        panic!("resting on the furniture never counted as a fall")
+    };
+    let mut off_fell = false;
+    for _ in 0..k {
+        off_fell |= off.step(&zero).fell;
+    }
+    assert!(
+        !off_fell,
+        "by the height rules alone it is up at step {k} (the test's premise)"
+    );
+    assert!(
+        on.world.furniture_contacts()[0] || on.world.furniture_contacts()[1],
+        "pelvis or torso on the furniture"
+    );
+}

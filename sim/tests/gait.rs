@@ -3,14 +3,15 @@
 //! residual actions and phase observation.
 
 use lhm_scenes::Benchmark;
-use lhm_sim::env::{EnvConfig, GaitConfig, TaskEnv};
+use lhm_sim::env::{empty_room, EnvConfig, GaitConfig, TaskEnv};
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
-    base_targets, braking_targets, reference_for, BalanceGains, GaitReference, Rig,
+    aligned_to, base_targets, braking_targets, reference_for, BalanceGains, GaitReference, Rig,
 };
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
 use lhm_sim::obs::BodyState;
+use lhm_sim::task::rewards::imitation;
 use lhm_sim::{CharacterModel, SimConfig};
 use rapier3d::math::{Rotation, Vector};
 use std::sync::Arc;
@@ -395,4 +396,129 @@ fn the_cycle_waits_for_a_late_footfall_and_jumps_to_an_early_one() {
         r.advance(&rig, before, &airborne, &mut waited, 0, 0),
         before + 1
     );
+}
+
+#[test]
+fn a_frame_aligned_onto_a_root_takes_its_heading_and_ground_position_and_keeps_the_rest() {
+    let model = CharacterModel::amp_humanoid();
+    let frame = stride(&model);
+    // Onto its own root: unchanged.
+    let same = aligned_to(&frame, &frame[0]);
+    for (a, b) in same.iter().zip(&frame) {
+        assert!((a.pos - b.pos).length() < 1e-5 && a.rot.angle_between(b.rot) < 1e-4);
+    }
+    // Onto a root 3 m away, 1.5 m higher and turned by 1 rad (tilted too): the frame's root
+    // takes its ground position and heading but keeps its own height and tilt.
+    let onto = BodyState {
+        pos: Vector::new(3.0, -1.0, 2.4),
+        rot: Rotation::from_rotation_z(1.4) * Rotation::from_rotation_y(0.3),
+        linvel: Vector::ZERO,
+        angvel: Vector::ZERO,
+    };
+    let moved = aligned_to(&frame, &onto);
+    assert!((moved[0].pos.x - 3.0).abs() < 1e-5 && (moved[0].pos.y + 1.0).abs() < 1e-5);
+    assert!(
+        (moved[0].pos.z - frame[0].pos.z).abs() < 1e-5,
+        "height kept"
+    );
+    let heading = |b: &BodyState| {
+        let f = b.rot * Vector::X;
+        f.y.atan2(f.x)
+    };
+    assert!((heading(&moved[0]) - heading(&onto)).abs() < 1e-4);
+    let turn = Rotation::from_rotation_z(1.0);
+    for (a, b) in moved.iter().zip(&frame) {
+        let rel_a = a.pos - moved[0].pos;
+        let rel_b = turn * (b.pos - frame[0].pos);
+        assert!(
+            (rel_a - rel_b).length() < 1e-4,
+            "the body's place about the root turns with it"
+        );
+        assert!((a.linvel - turn * b.linvel).length() < 1e-4);
+    }
+    // Tracking is blind to the move: a frame scores 1 against itself moved anywhere.
+    let ends: Vec<usize> = ["left_foot", "right_foot", "left_hand", "right_hand"]
+        .iter()
+        .filter_map(|n| model.body_index(n))
+        .collect();
+    let score = imitation(&moved, &aligned_to(&frame, &moved[0]), &ends);
+    assert!((score - 1.0).abs() < 1e-4, "{score}");
+}
+
+#[test]
+fn in_a_gait_run_the_imitation_term_tracks_the_gait_wherever_it_heads() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let env_with = |imitation: f32| {
+        let bench = Benchmark::embedded().unwrap();
+        let (_, task) = bench.task("train-0001").unwrap();
+        // No steering: it would turn the two headings below differently.
+        let mut config = EnvConfig {
+            gait: Some(GaitConfig {
+                steer_gain: 0.0,
+                ..GaitConfig::default()
+            }),
+            empty_room: true,
+            ..EnvConfig::default()
+        };
+        config.weights.imitation = imitation;
+        TaskEnv::new(
+            &model,
+            &task,
+            &bench.catalogue,
+            SimConfig::default(),
+            config,
+        )
+    };
+    let zero = vec![0.0; model.dofs.len()];
+    // The same start turned two ways earns the same tracking (the course is free).
+    let mut terms = Vec::new();
+    for yaw in [0.0, 2.0] {
+        let mut env = env_with(1.0);
+        assert!(env.start_in_gait(&demo, Arc::clone(&reference), 3, yaw));
+        terms.push(
+            (0..5)
+                .map(|_| env.step(&zero).terms.imitation)
+                .collect::<Vec<_>>(),
+        );
+    }
+    for (a, b) in terms[0].iter().zip(&terms[1]) {
+        assert!((a - b).abs() < 0.05, "{:?} vs {:?}", terms[0], terms[1]);
+    }
+    assert!(
+        terms[0][0] > 0.5,
+        "on the gait from its own frame: {:?}",
+        terms[0]
+    );
+    // A large residual on every joint takes the character off its reference: tracked lower.
+    let mut env = env_with(1.0);
+    env.start_in_gait(&demo, Arc::clone(&reference), 3, 0.0);
+    let off: Vec<f32> = (0..model.dofs.len())
+        .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 })
+        .collect();
+    let bent: Vec<f32> = (0..5).map(|_| env.step(&off).terms.imitation).collect();
+    assert!(bent[4] < terms[0][4] - 0.1, "{bent:?} vs {:?}", terms[0]);
+    // With the weight at 0 the term is not computed.
+    let mut env = env_with(0.0);
+    env.start_in_gait(&demo, Arc::clone(&reference), 3, 0.0);
+    assert_eq!(env.step(&zero).terms.imitation, 0.0);
+}
+
+#[test]
+fn an_empty_room_has_no_furniture_and_its_objects_far_along_x() {
+    let bench = Benchmark::embedded().unwrap();
+    let (_, task) = bench.task("train-0001").unwrap();
+    assert!(
+        !task.obstacles.is_empty(),
+        "the task has furniture to remove"
+    );
+    let empty = empty_room(&task);
+    assert!(empty.obstacles.is_empty());
+    assert_eq!(empty.room_size, [60.0, 60.0]);
+    for (a, b) in empty.objects.iter().zip(&task.objects) {
+        assert_eq!(a.pos[0], b.pos[0] + 25.0);
+        assert_eq!((a.pos[1], a.pos[2]), (b.pos[1], b.pos[2]));
+    }
+    assert_eq!(empty.start.pos, task.start.pos);
 }

@@ -304,20 +304,12 @@ fn rollout_room(s: &Setup, g: &[f32], i: usize, steps: usize) -> (usize, f32) {
     (up, if env.reached { 1.0 } else { 0.0 })
 }
 
-/// EMPTY=1: no furniture, walls and objects far away (the character's own falls only).
-fn empty_room(task: &mut lhm_scenes::Task) {
-    task.obstacles.clear();
-    task.room_size = [60.0, 60.0];
-    for o in &mut task.objects {
-        o.pos[0] += 25.0;
-    }
-}
-
 /// The probe's environment: task train-0001 (`empty`: emptied), the default configuration.
 fn probe_env(s: &Setup, empty: bool) -> Option<TaskEnv> {
     let (_, mut task) = s.bench.task("train-0001")?;
     if empty {
-        empty_room(&mut task);
+        // EMPTY=1: the character's own falls only.
+        task = lhm_sim::env::empty_room(&task);
     }
     Some(TaskEnv::new(
         &s.model,

@@ -217,7 +217,8 @@ pub struct RewardWeights {
     /// only reason to stay up was ~0.05 of task reward per step (RESULTS.md, third session).
     pub alive: f32,
     /// Tracking the clip a demo start came from ([`imitation`]) for `EnvConfig::imitation_seconds`
-    /// after the start; 0 (off) by default.
+    /// after the start — or, while an `[env.gait]` walks, the gait's own reference moved onto the
+    /// character's heading and ground position, every step; 0 (off) by default.
     pub imitation: f32,
     /// One-off reward on the step a Hierarchical-RL skill hands over to the next one (its
     /// completion); paid only under the skill machine (`EnvConfig::skills`).
