@@ -6,7 +6,7 @@ use lhm_scenes::Benchmark;
 use lhm_sim::env::{EnvConfig, TaskEnv};
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
-use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
+use lhm_sim::motion::retarget::{forward_kinematics, resting_states, KinematicPose};
 use lhm_sim::obs::{amp_frame, finite_difference_states, BodyState};
 use lhm_sim::{CharacterModel, SimConfig};
 use rapier3d::math::{Rotation, Vector};
@@ -146,17 +146,7 @@ fn replayed_clip_gives_the_demo_amp_frames() {
     // kinematic replay equals DemoMotion's features frame for frame.
     let (model, demo, _) = setup();
     let dt = 1.0 / 30.0;
-    let states = |t: f32| -> Vec<BodyState> {
-        forward_kinematics(&model, &demo.pose_at(0, t))
-            .into_iter()
-            .map(|(pos, rot)| BodyState {
-                pos,
-                rot,
-                linvel: Vector::ZERO,
-                angvel: Vector::ZERO,
-            })
-            .collect()
-    };
+    let states = |t: f32| -> Vec<BodyState> { resting_states(&model, &demo.pose_at(0, t)) };
     for k in 2..80 {
         let t = k as f32 * dt;
         let env_frame = amp_frame(

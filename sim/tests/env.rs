@@ -258,8 +258,7 @@ fn under_the_skill_machine_each_step_pays_the_acting_skill_and_a_skill_ends_when
 /// The character lying on its back across the task's tallest piece of furniture, 10 cm above
 /// its top, at rest.
 fn lying_on_furniture(env: &mut TaskEnv, model: &CharacterModel) {
-    use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
-    use lhm_sim::obs::BodyState;
+    use lhm_sim::motion::retarget::{resting_states, KinematicPose};
     let top = env
         .task
         .obstacles
@@ -277,16 +276,8 @@ fn lying_on_furniture(env: &mut TaskEnv, model: &CharacterModel) {
         root_rot: Rotation::from_rotation_y(-std::f32::consts::FRAC_PI_2),
         local_rots: vec![Rotation::IDENTITY; model.bodies.len()],
     };
-    let states: Vec<BodyState> = forward_kinematics(model, &pose)
-        .into_iter()
-        .map(|(pos, rot)| BodyState {
-            pos,
-            rot,
-            linvel: Vector::ZERO,
-            angvel: Vector::ZERO,
-        })
-        .collect();
-    env.world.set_character_state(&pose, &states);
+    env.world
+        .set_character_state(&pose, &resting_states(model, &pose));
 }
 
 #[test]

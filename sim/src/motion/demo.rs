@@ -10,7 +10,9 @@
 use super::deepmimic::DeepMimicClip;
 use super::library::{self, Source};
 use super::omomo::{self, OmomoClip};
-use super::retarget::{deepmimic_poses, forward_kinematics, omomo_poses, KinematicPose};
+use super::retarget::{
+    deepmimic_poses, forward_kinematics, omomo_poses, resting_states, KinematicPose,
+};
 use super::MotionError;
 use crate::env::EnvConfig;
 use crate::mjcf::{BodyDef, CharacterModel};
@@ -277,15 +279,7 @@ impl DemoMotion {
 
     /// Body states (zero velocities) of `clip`'s pose at `t`, clamped to the clip.
     fn poses_at(&self, c: &DemoClip, t: f32) -> Vec<BodyState> {
-        forward_kinematics(&self.model, &c.pose_at(t.clamp(0.0, c.duration_s())))
-            .into_iter()
-            .map(|(pos, rot)| BodyState {
-                pos,
-                rot,
-                linvel: Vector::ZERO,
-                angvel: Vector::ZERO,
-            })
-            .collect()
+        resting_states(&self.model, &c.pose_at(t.clamp(0.0, c.duration_s())))
     }
 
     /// A reference-state start: a clip without an object, drawn with probability proportional to

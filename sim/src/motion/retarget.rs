@@ -11,6 +11,7 @@
 use super::deepmimic::{DeepMimicClip, DeepMimicFrame, JOINTS};
 pub use super::omomo_retarget::omomo_poses;
 use crate::mjcf::CharacterModel;
+use crate::obs::BodyState;
 use rapier3d::math::{Rotation, Vector};
 
 /// A pose of the character without dynamics.
@@ -20,6 +21,19 @@ pub struct KinematicPose {
     pub root_rot: Rotation,
     /// Per model body: its rotation relative to its parent (identity for the root and welds).
     pub local_rots: Vec<Rotation>,
+}
+
+/// Every body's state in `pose`, held still: [`forward_kinematics`] with zero velocities.
+pub fn resting_states(model: &CharacterModel, pose: &KinematicPose) -> Vec<BodyState> {
+    forward_kinematics(model, pose)
+        .into_iter()
+        .map(|(pos, rot)| BodyState {
+            pos,
+            rot,
+            linvel: Vector::ZERO,
+            angvel: Vector::ZERO,
+        })
+        .collect()
 }
 
 /// World position and rotation of every body, in model order.
