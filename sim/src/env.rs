@@ -394,10 +394,7 @@ impl TaskEnv {
         let Some(root) = states.first() else { return };
         let pose = demo.pose_at(clip, t);
         // The rigid motion taking the clip's root heading frame onto the task's start.
-        let clip_yaw = {
-            let f = root.rot * Vector::X;
-            f.y.atan2(f.x)
-        };
+        let clip_yaw = crate::obs::heading_yaw(root.rot);
         let turn = Rotation::from_rotation_z(yaw - clip_yaw);
         let start = Vector::new(at[0], at[1], 0.0);
         let origin = Vector::new(root.pos.x, root.pos.y, 0.0);

@@ -15,7 +15,7 @@
 use crate::fidelity::joint_angles;
 use crate::mjcf::CharacterModel;
 use crate::motion::demo::DemoMotion;
-use crate::obs::{BodyState, HeadingFrame};
+use crate::obs::{heading_yaw, BodyState, HeadingFrame};
 use rapier3d::math::{Rotation, Vector};
 use serde::{Deserialize, Serialize};
 
@@ -247,11 +247,7 @@ pub fn aligned_to(frame: &[BodyState], onto: &BodyState) -> Vec<BodyState> {
     let Some(root) = frame.first() else {
         return Vec::new();
     };
-    let yaw = |r: &BodyState| {
-        let f = r.rot * Vector::X;
-        f.y.atan2(f.x)
-    };
-    let turn = Rotation::from_rotation_z(yaw(onto) - yaw(root));
+    let turn = Rotation::from_rotation_z(heading_yaw(onto.rot) - heading_yaw(root.rot));
     let (from, to) = (
         Vector::new(root.pos.x, root.pos.y, 0.0),
         Vector::new(onto.pos.x, onto.pos.y, 0.0),

@@ -24,10 +24,15 @@ pub struct HeadingFrame {
     inv_yaw: Rotation,
 }
 
+/// The heading (radians about +z, 0 along +x) of a body whose forward axis is its local x.
+pub fn heading_yaw(rot: Rotation) -> f32 {
+    let forward = rot * Vector::X;
+    forward.y.atan2(forward.x)
+}
+
 impl HeadingFrame {
     pub fn of(root: &BodyState) -> Self {
-        let forward = root.rot * Vector::X;
-        let yaw = forward.y.atan2(forward.x);
+        let yaw = heading_yaw(root.rot);
         Self {
             origin: Vector::new(root.pos.x, root.pos.y, 0.0),
             inv_yaw: Rotation::from_rotation_z(-yaw),
@@ -120,11 +125,7 @@ pub fn obstacle_map(
     cells: usize,
     cell: f32,
 ) -> Vec<f32> {
-    let (s, c) = {
-        let forward = root.rot * Vector::X;
-        let yaw = forward.y.atan2(forward.x);
-        yaw.sin_cos()
-    };
+    let (s, c) = heading_yaw(root.rot).sin_cos();
     let half = cells as f32 * cell / 2.0;
     let mut out = vec![0.0f32; cells * cells];
     for i in 0..cells {

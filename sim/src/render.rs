@@ -20,8 +20,7 @@ impl Camera {
     /// Behind and to the side of the character, looking at its pelvis.
     pub fn third_person(world: &World, width: u32, height: u32) -> Self {
         let root = world.body_pose(0);
-        let forward = root.rotation * Vector::X;
-        let yaw = forward.y.atan2(forward.x);
+        let yaw = crate::obs::heading_yaw(root.rotation);
         let back = Vector::new(-yaw.cos(), -yaw.sin(), 0.0);
         let side = Vector::new(-yaw.sin(), yaw.cos(), 0.0);
         let target = Vector::new(root.translation.x, root.translation.y, 0.7);

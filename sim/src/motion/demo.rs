@@ -431,10 +431,7 @@ impl GroundMove {
     /// The ground move carrying root frame `a` onto root frame `b` (heading and horizontal
     /// position; height and tilt are left to the clip).
     fn between(a: (Vector, Rotation), b: (Vector, Rotation)) -> Self {
-        let yaw = |r: Rotation| {
-            let f = r * Vector::X;
-            f.y.atan2(f.x)
-        };
+        let yaw = crate::obs::heading_yaw;
         Self {
             turn: Rotation::from_rotation_z(yaw(b.1) - yaw(a.1)),
             from: Vector::new(a.0.x, a.0.y, 0.0),
