@@ -43,18 +43,35 @@ impl EpisodeEval {
     }
 }
 
+/// The random stream of seed `seed` on task `task_id`: the task id keeps seeds independent
+/// across tasks.
+fn seed_stream(task_id: &str, seed: u64) -> SplitMix64 {
+    let id_hash = task_id.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    });
+    SplitMix64::new(seed ^ id_hash)
+}
+
 /// `task` as seed `seed` runs it (see [`START_YAW_JITTER`]).
 pub fn seeded_task(task: &Task, seed: u64) -> Task {
     let mut t = task.clone();
     if seed > 0 {
-        // The task id keeps seeds independent across tasks.
-        let id_hash = task.id.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-        });
-        let mut rng = SplitMix64::new(seed ^ id_hash);
+        let mut rng = seed_stream(&task.id, seed);
         t.start.yaw += START_YAW_JITTER * (2.0 * rng.next_f64() - 1.0);
     }
     t
+}
+
+/// The step of a `cycle_len`-step gait cycle that seed `seed` of task `task_id` starts in: the
+/// first for seed 0 (the task as specified), a uniform draw for later seeds, so that several
+/// seeds see the walk from several phases as the actors' starts do.
+pub fn gait_start_step(task_id: &str, seed: u64, cycle_len: usize) -> usize {
+    if seed == 0 || cycle_len == 0 {
+        return 0;
+    }
+    let mut rng = seed_stream(task_id, seed);
+    rng.next_f64(); // the start-yaw draw of `seeded_task`
+    rng.below(cycle_len)
 }
 
 struct Slot {
@@ -95,9 +112,13 @@ pub struct EvalSetup<'a> {
     /// A VLA policy hears each cycle's instruction; `false` blanks it (the no-language
     /// ablation). State-based policies ignore it.
     pub language: bool,
-    /// With `[env.gait]`: the clips and the gait cycle every episode starts in (step 0, turned
-    /// toward the first object), as the run's actors start theirs. `None` without a gait.
+    /// With `[env.gait]`: the clips and the gait cycle every episode starts in, turned toward
+    /// the first object as the run's actors start theirs: seed 0 at the cycle's first step,
+    /// later seeds at a step drawn from the seed ([`gait_start_step`]). `None` without a gait.
     pub gait: Option<GaitStart<'a>>,
+    /// Ends every episode after at most this many control steps (e.g. 300, 10 s at 30 Hz, to
+    /// measure how long a walk stays up); `None`: every pair's cycle time limit.
+    pub max_steps: Option<u32>,
 }
 
 /// What an episode in `[env.gait]` starts from.
@@ -114,15 +135,17 @@ impl EvalSetup<'_> {
     pub fn env_for(&self, task: &Task, seed: u64) -> TaskEnv {
         let task = seeded_task(task, seed);
         let pairs = task.sequence.len() as u32;
+        let cycles_limit = pairs * self.env.switching.max_cycle_steps + EPISODE_SLACK_STEPS;
         let config = EnvConfig {
-            max_episode_steps: pairs * self.env.switching.max_cycle_steps + EPISODE_SLACK_STEPS,
+            max_episode_steps: self.max_steps.map_or(cycles_limit, |m| m.min(cycles_limit)),
             demo_start_probability: 0.0,
             ..self.env.clone()
         };
         let mut env = TaskEnv::new(self.model, &task, self.catalogue, self.sim.clone(), config);
         if let Some(g) = &self.gait {
             let yaw = env.yaw_toward_first_object();
-            env.start_in_gait(g.demo, std::sync::Arc::clone(&g.reference), 0, yaw);
+            let step = gait_start_step(&task.id, seed, g.reference.len());
+            env.start_in_gait(g.demo, std::sync::Arc::clone(&g.reference), step, yaw);
         }
         env
     }
@@ -294,6 +317,9 @@ pub struct EvalTable {
     pub dist: Vec<MeanStd>,
     pub success_all: MeanStd,
     pub fall_rate: MeanStd,
+    /// Control steps an episode ran (to its fall, its end, or the step cap): how long the
+    /// character stayed up.
+    pub steps: MeanStd,
 }
 
 pub fn summarize(episodes: &[EpisodeEval]) -> EvalTable {
@@ -346,13 +372,15 @@ pub fn summarize(episodes: &[EpisodeEval]) -> EvalTable {
             )
         }),
         fall_rate: per_seed(&|es| mean(es.iter().map(|e| f64::from(u8::from(e.fell))).collect())),
+        steps: per_seed(&|es| mean(es.iter().map(|e| f64::from(e.steps)).collect())),
         seeds,
     }
 }
 
 impl EvalTable {
     /// Flat keys for `--json`: `success_k`, `dist_k` (k from 1), `success_all`, `fall_rate`, as
-    /// fractions and metres (means over seeds), each with a `_std` twin.
+    /// fractions and metres, and `mean_steps` (control steps per episode), means over seeds,
+    /// each with a `_std` twin.
     pub fn flat(&self) -> std::collections::BTreeMap<String, f64> {
         let mut out = std::collections::BTreeMap::new();
         let mut put = |key: String, v: MeanStd| {
@@ -367,6 +395,7 @@ impl EvalTable {
         }
         put("success_all".into(), self.success_all);
         put("fall_rate".into(), self.fall_rate);
+        put("mean_steps".into(), self.steps);
         out
     }
 
@@ -466,8 +495,16 @@ mod tests {
         assert!((t.success_all.mean - 0.25).abs() < 1e-12);
         assert!((t.dist[1].mean - (0.3 + 2.0) / 2.0).abs() < 1e-6);
         assert!((t.fall_rate.mean - 0.75).abs() < 1e-12);
+        assert_eq!((t.steps.mean, t.steps.std), (10.0, 0.0));
         let flat = t.flat();
-        for key in ["success_1", "success_2", "success_all", "dist_1", "dist_2"] {
+        for key in [
+            "success_1",
+            "success_2",
+            "success_all",
+            "dist_1",
+            "dist_2",
+            "mean_steps",
+        ] {
             assert!(flat.contains_key(key), "{key}");
         }
         let md = t.markdown("T1");
@@ -523,6 +560,7 @@ mod tests {
                 batch: 3,
                 language: true,
                 gait: None,
+                max_steps: None,
             };
             evaluate(&ac, &setup, &jobs, &|n| {
                 seen.store(n, std::sync::atomic::Ordering::Relaxed)
@@ -574,6 +612,7 @@ mod tests {
             batch: 2,
             language: true,
             gait: None,
+            max_steps: None,
         };
         let run = |p: EvalPolicy, jobs: &[(Task, u64)]| evaluate(p, &setup, jobs, &|_| {}).unwrap();
         let teachers = EvalPolicy::Teachers {
@@ -621,5 +660,87 @@ mod tests {
             assert_eq!(t.start.pos, task.start.pos);
         }
         assert_eq!(seeded_task(&task, 1), a, "deterministic");
+    }
+
+    #[test]
+    fn mean_steps_is_per_seed_then_over_seeds() {
+        let mut eps = [
+            episode(0, &[false], &[1.0], true),
+            episode(0, &[false], &[1.0], false),
+            episode(1, &[false], &[1.0], true),
+        ];
+        eps[0].steps = 40;
+        eps[1].steps = 300;
+        eps[2].steps = 90;
+        let t = summarize(&eps);
+        // Seed 0: (40 + 300) / 2 = 170; seed 1: 90.
+        assert!((t.steps.mean - 130.0).abs() < 1e-9, "{:?}", t.steps);
+        assert!(
+            (t.steps.std - 40.0 * 2f64.sqrt()).abs() < 1e-9,
+            "{:?}",
+            t.steps
+        );
+        assert_eq!(t.flat()["mean_steps"], t.steps.mean);
+    }
+
+    #[test]
+    fn gait_starts_at_the_first_step_for_seed_zero_and_spread_over_the_cycle_for_others() {
+        assert_eq!(gait_start_step("unseen-001", 0, 40), 0);
+        assert_eq!(gait_start_step("unseen-001", 3, 0), 0);
+        let steps: Vec<usize> = (1..200)
+            .map(|s| gait_start_step("unseen-001", s, 40))
+            .collect();
+        assert!(steps.iter().all(|&s| s < 40));
+        let mut distinct = steps.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        assert!(distinct.len() > 30, "{distinct:?}");
+        // Deterministic, and independent across tasks.
+        assert_eq!(gait_start_step("unseen-001", 7, 40), steps[6]);
+        let other: Vec<usize> = (1..200)
+            .map(|s| gait_start_step("unseen-002", s, 40))
+            .collect();
+        assert_ne!(steps, other);
+    }
+
+    #[test]
+    fn max_steps_caps_every_episode_below_the_cycle_limit() {
+        let bench = lhm_scenes::Benchmark::embedded().unwrap();
+        let model = CharacterModel::amp_humanoid();
+        let env = EnvConfig::default();
+        let sim = SimConfig::default();
+        let ac = ActorCritic::new(
+            TaskEnv::obs_dim(&model, &env),
+            model.dofs.len(),
+            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
+        )
+        .unwrap();
+        let jobs: Vec<(Task, u64)> = bench.tasks(lhm_scenes::Split::Unseen)[..2]
+            .iter()
+            .map(|t| (t.clone(), 0))
+            .collect();
+        let setup = EvalSetup {
+            model: &model,
+            catalogue: &bench.catalogue,
+            sim: &sim,
+            env: &env,
+            batch: 2,
+            language: true,
+            gait: None,
+            max_steps: Some(5),
+        };
+        assert_eq!(setup.env_for(&jobs[0].0, 0).config.max_episode_steps, 5);
+        for e in evaluate(&ac, &setup, &jobs, &|_| {}).unwrap() {
+            // Nothing falls within 5 steps of a standing start: the cap ends the episode.
+            assert_eq!((e.steps, e.fell), (5, false), "{e:?}");
+        }
+        // A cap above the cycles' limit leaves the limit.
+        let loose = EvalSetup {
+            max_steps: Some(100_000),
+            ..setup
+        };
+        let pairs = jobs[0].0.sequence.len() as u32;
+        let limit = pairs * env.switching.max_cycle_steps + EPISODE_SLACK_STEPS;
+        assert_eq!(loose.env_for(&jobs[0].0, 0).config.max_episode_steps, limit);
     }
 }

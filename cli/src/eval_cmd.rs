@@ -5,6 +5,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use lhm_actor::eval::{episodes_csv, evaluate, summarize, EvalPolicy, EvalSetup, START_YAW_JITTER};
+use lhm_nets::ActorCritic;
 use lhm_scenes::{Benchmark, Split, Task};
 use lhm_sim::render::{write_gif, Camera};
 use lhm_sim::CharacterModel;
@@ -12,7 +13,9 @@ use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct EvalArgs {
-    /// A learner checkpoint (`runs/<run>/checkpoint` or `runs/<run>/policy`).
+    /// A learner checkpoint (`runs/<run>/checkpoint` or `runs/<run>/policy`), or `zero`: every
+    /// action 0 (the neutral pose; in a `[env.gait]` run, the gait alone), the baseline a
+    /// trained policy is measured against.
     #[arg(long)]
     pub(crate) policy: PathBuf,
     /// `train` (350 two-object tasks), `unseen` (66), `extension` (3-5 objects), or `ext3`,
@@ -20,7 +23,8 @@ pub struct EvalArgs {
     #[arg(long, default_value = "unseen")]
     pub(crate) split: String,
     /// Seeds per task: seed 0 is the task as specified, later seeds turn the character's start
-    /// heading by up to ±0.2 rad.
+    /// heading by up to ±0.2 rad (and, for a run with `[env.gait]`, start the walk at a step of
+    /// its cycle drawn from the seed instead of the first).
     #[arg(long, default_value_t = 3)]
     pub(crate) seeds: u64,
     /// Only each task's first (object, goal) pair (Teacher 1's setting).
@@ -47,6 +51,10 @@ pub struct EvalArgs {
     /// Environments stepped in lockstep (one batched forward pass per step).
     #[arg(long, default_value_t = 64)]
     pub(crate) batch: usize,
+    /// End every episode after at most N control steps (30 per second): e.g. 300 to measure
+    /// how long a walk stays up within 10 s (`mean_steps`). Default: every pair's cycle limit.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub(crate) max_steps: Option<u32>,
     /// Also write a GIF of each of the first N episodes (mean actions, third person, until the
     /// episode ends; 10 fps) into the --output directory, named `<task>-s<seed>.gif`.
     #[arg(long, default_value_t = 0)]
@@ -90,6 +98,19 @@ pub(crate) fn table_is_current(
         && field("teacher1_iteration") == teacher1.and_then(policy_iteration)
 }
 
+/// A policy whose mean action is exactly 0 in every state (its output layer's weights and bias
+/// are 0): `--policy zero`.
+fn zero_actions(model: &CharacterModel, env: &lhm_sim::env::EnvConfig) -> Result<ActorCritic> {
+    let mut network = lhm_nets::ActorCriticConfig::with_hidden(&[8]);
+    network.policy.output_init_scale = 0.0;
+    ActorCritic::new(
+        lhm_sim::env::TaskEnv::obs_dim(model, env),
+        model.dofs.len(),
+        &network,
+    )
+    .context("building the zero-action policy")
+}
+
 pub(crate) fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
     let (split, pairs) = match name {
         "ext3" => (Split::Extension, Some(3)),
@@ -119,12 +140,20 @@ pub fn run(a: EvalArgs) -> Result<()> {
     }
     let bench = a.scenes.load()?;
     let model = CharacterModel::amp_humanoid();
+    let zero_policy = a.policy.as_os_str() == "zero";
     let train = crate::render_cmd::without_training_aids(crate::render_cmd::train_config_for(
-        Some(&a.policy),
+        (!zero_policy).then_some(a.policy.as_path()),
         a.config.as_deref(),
     )?);
-    let learner = crate::render_cmd::load_policy(&a.policy, &train, &model)?;
-    if a.no_language && learner.actor_critic.policy.encoder().is_none() {
+    if zero_policy && a.teacher1.is_some() {
+        bail!("--policy zero with --teacher1: the zero action is not a Teacher 2");
+    }
+    let actor_critic = if zero_policy {
+        zero_actions(&model, &train.env)?
+    } else {
+        crate::render_cmd::load_policy(&a.policy, &train, &model)?.actor_critic
+    };
+    if a.no_language && actor_critic.policy.encoder().is_none() {
         bail!(
             "--no-language: {} is not a VLA policy (it reads the state, not an instruction)",
             a.policy.display()
@@ -140,9 +169,9 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let policy = match &teacher1 {
         Some(t1) => EvalPolicy::Teachers {
             first: &t1.actor_critic,
-            later: &learner.actor_critic,
+            later: &actor_critic,
         },
-        None => EvalPolicy::One(&learner.actor_critic),
+        None => EvalPolicy::One(&actor_critic),
     };
     let mut tasks = split_tasks(&bench, &a.split)?;
     if a.first_pair {
@@ -204,6 +233,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         batch: a.batch,
         language: !a.no_language,
         gait,
+        max_steps: a.max_steps,
     };
     let episodes = evaluate(policy, &setup, &jobs, &|done| {
         bar.set_position(done as u64);
@@ -228,6 +258,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         "split": a.split,
         "tasks": tasks.len(),
         "seeds": a.seeds,
+        "max_steps": a.max_steps,
         "episodes": table.episodes,
         "start_yaw_jitter_rad": START_YAW_JITTER,
         "wall_s": wall,
@@ -270,7 +301,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                     // The same switch as the evaluation: Teacher 1 on the first cycle.
                     let ac = match &teacher1 {
                         Some(t1) if env.cycles.current == 0 => &t1.actor_critic,
-                        _ => &learner.actor_critic,
+                        _ => &actor_critic,
                     };
                     Ok(
                         ac.act_deterministic(&lhm_actor::rollout::policy_observation(
@@ -305,6 +336,12 @@ pub fn run(a: EvalArgs) -> Result<()> {
             table.episodes as f64 / wall
         );
         print!("{markdown}");
+        println!(
+            "\nsteps per episode (to a fall, the end, or the cap{}): {:.1} ± {:.1}",
+            a.max_steps.map(|m| format!(" of {m}")).unwrap_or_default(),
+            table.steps.mean,
+            table.steps.std
+        );
     }
     Ok(())
 }

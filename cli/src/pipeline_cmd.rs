@@ -595,6 +595,7 @@ fn evaluate(
                 output: Some(out),
                 batch: 64,
                 gifs: 0,
+                max_steps: None,
                 no_language: row.no_language,
                 scenes: scenes.clone(),
             })

@@ -292,6 +292,7 @@ fn evaluation(
         output: Some(out),
         batch: 64,
         gifs: 0,
+        max_steps: None,
         no_language: false,
         scenes: args.scenes.clone(),
     })

@@ -77,6 +77,7 @@ pub fn run(a: VlaProbeArgs) -> Result<()> {
         batch: 1,
         language: true,
         gait: None,
+        max_steps: None,
     };
     let mut rows = Vec::new();
     for split in &a.splits {

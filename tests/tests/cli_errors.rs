@@ -189,3 +189,46 @@ fn bad_stages_pipelines_and_demo_starts_are_refused_by_name() {
     assert!(stderr.contains("not a time in seconds"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn eval_scores_the_zero_action_under_a_step_cap_and_refuses_bad_caps() {
+    let out = Command::new(lhm())
+        .args([
+            "eval",
+            "--policy",
+            "zero",
+            "--split",
+            "unseen",
+            "--limit",
+            "2",
+            "--seeds",
+            "2",
+            "--first-pair",
+            "--max-steps",
+            "5",
+            "--json",
+        ])
+        .output()
+        .expect("running lhm");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("eval --json");
+    // Standing still for 5 steps: every episode runs to the cap and none falls.
+    assert_eq!(json["mean_steps"], 5.0, "{json}");
+    assert_eq!(json["fall_rate"], 0.0, "{json}");
+    assert_eq!(json["max_steps"], 5, "{json}");
+    assert_eq!(json["episodes"], 4, "{json}");
+    for (args, expected) in [
+        (vec!["--max-steps", "0"], "--max-steps"),
+        (vec!["--teacher1", "zero"], "--teacher1"),
+    ] {
+        let out = Command::new(lhm())
+            .args(["eval", "--policy", "zero", "--limit", "1"])
+            .args(&args)
+            .output()
+            .expect("running lhm");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+    }
+}
