@@ -465,6 +465,26 @@ pub fn episodes_csv(episodes: &[EpisodeEval]) -> String {
 mod tests {
     use super::*;
 
+    /// No gait, no step cap, instructions heard: the setup most tests evaluate under.
+    fn plain_setup<'a>(
+        model: &'a CharacterModel,
+        bench: &'a lhm_scenes::Benchmark,
+        sim: &'a SimConfig,
+        env: &'a EnvConfig,
+        batch: usize,
+    ) -> EvalSetup<'a> {
+        EvalSetup {
+            model,
+            catalogue: &bench.catalogue,
+            sim,
+            env,
+            batch,
+            language: true,
+            gait: None,
+            max_steps: None,
+        }
+    }
+
     fn episode(seed: u64, success: &[bool], dist: &[f32], fell: bool) -> EpisodeEval {
         EpisodeEval {
             task_id: format!("t{seed}"),
@@ -552,16 +572,7 @@ mod tests {
             .collect();
         let seen = std::sync::atomic::AtomicUsize::new(0);
         let run = || {
-            let setup = EvalSetup {
-                model: &model,
-                catalogue: &bench.catalogue,
-                sim: &sim,
-                env: &env,
-                batch: 3,
-                language: true,
-                gait: None,
-                max_steps: None,
-            };
+            let setup = plain_setup(&model, &bench, &sim, &env, 3);
             evaluate(&ac, &setup, &jobs, &|n| {
                 seen.store(n, std::sync::atomic::Ordering::Relaxed)
             })
@@ -604,16 +615,7 @@ mod tests {
             .iter()
             .filter_map(|(t, s)| t.single_pair(0).map(|t| (t, *s)))
             .collect();
-        let setup = EvalSetup {
-            model: &model,
-            catalogue: &bench.catalogue,
-            sim: &sim,
-            env: &env,
-            batch: 2,
-            language: true,
-            gait: None,
-            max_steps: None,
-        };
+        let setup = plain_setup(&model, &bench, &sim, &env, 2);
         let run = |p: EvalPolicy, jobs: &[(Task, u64)]| evaluate(p, &setup, jobs, &|_| {}).unwrap();
         let teachers = EvalPolicy::Teachers {
             first: &a,
@@ -720,14 +722,8 @@ mod tests {
             .map(|t| (t.clone(), 0))
             .collect();
         let setup = EvalSetup {
-            model: &model,
-            catalogue: &bench.catalogue,
-            sim: &sim,
-            env: &env,
-            batch: 2,
-            language: true,
-            gait: None,
             max_steps: Some(5),
+            ..plain_setup(&model, &bench, &sim, &env, 2)
         };
         assert_eq!(setup.env_for(&jobs[0].0, 0).config.max_episode_steps, 5);
         for e in evaluate(&ac, &setup, &jobs, &|_| {}).unwrap() {
