@@ -35,6 +35,9 @@ pub struct EpisodeEval {
     /// The physics guard tripped: the episode was cut and counts as failed.
     pub physics_invalid: bool,
     pub steps: u32,
+    /// The control step at which the root first came within the reach distance of its current
+    /// object (horizontally; `[env] reach_distance`); `None` if it never did.
+    pub reach_step: Option<u32>,
 }
 
 impl EpisodeEval {
@@ -78,6 +81,7 @@ struct Slot {
     env: TaskEnv,
     seed: u64,
     action: Vec<f32>,
+    reach_step: Option<u32>,
     result: Option<EpisodeEval>,
 }
 
@@ -97,6 +101,7 @@ impl Slot {
             fell,
             physics_invalid,
             steps,
+            reach_step: self.reach_step,
         });
     }
 }
@@ -230,6 +235,7 @@ pub fn evaluate<'a>(
                 env: setup.env_for(task, *seed),
                 seed: *seed,
                 action: vec![0.0; act_dim],
+                reach_step: None,
                 result: None,
             })
             .collect();
@@ -268,6 +274,9 @@ pub fn evaluate<'a>(
                     let action = std::mem::take(&mut s.action);
                     let r = s.env.step(&action);
                     s.action = action;
+                    if s.env.reached && s.reach_step.is_none() {
+                        s.reach_step = Some(s.env.steps());
+                    }
                     if r.done || r.truncated || r.physics_invalid {
                         let steps = s.env.steps();
                         s.finish(r.fell, r.physics_invalid, steps);
@@ -320,6 +329,8 @@ pub struct EvalTable {
     /// Control steps an episode ran (to its fall, its end, or the step cap): how long the
     /// character stayed up.
     pub steps: MeanStd,
+    /// Fraction of episodes whose root came within the reach distance of its object.
+    pub reach_rate: MeanStd,
 }
 
 pub fn summarize(episodes: &[EpisodeEval]) -> EvalTable {
@@ -373,14 +384,21 @@ pub fn summarize(episodes: &[EpisodeEval]) -> EvalTable {
         }),
         fall_rate: per_seed(&|es| mean(es.iter().map(|e| f64::from(u8::from(e.fell))).collect())),
         steps: per_seed(&|es| mean(es.iter().map(|e| f64::from(e.steps)).collect())),
+        reach_rate: per_seed(&|es| {
+            mean(
+                es.iter()
+                    .map(|e| f64::from(u8::from(e.reach_step.is_some())))
+                    .collect(),
+            )
+        }),
         seeds,
     }
 }
 
 impl EvalTable {
     /// Flat keys for `--json`: `success_k`, `dist_k` (k from 1), `success_all`, `fall_rate`, as
-    /// fractions and metres, and `mean_steps` (control steps per episode), means over seeds,
-    /// each with a `_std` twin.
+    /// fractions and metres, `mean_steps` (control steps per episode) and `reach_rate`, means
+    /// over seeds, each with a `_std` twin.
     pub fn flat(&self) -> std::collections::BTreeMap<String, f64> {
         let mut out = std::collections::BTreeMap::new();
         let mut put = |key: String, v: MeanStd| {
@@ -396,6 +414,7 @@ impl EvalTable {
         put("success_all".into(), self.success_all);
         put("fall_rate".into(), self.fall_rate);
         put("mean_steps".into(), self.steps);
+        put("reach_rate".into(), self.reach_rate);
         out
     }
 
@@ -423,11 +442,12 @@ impl EvalTable {
     }
 }
 
-/// One line per episode: `task_id,seed,steps,fell,physics_invalid,success_1..K,dist_1..K` (empty
-/// fields where a task has fewer pairs), with a header.
+/// One line per episode: `task_id,seed,steps,fell,physics_invalid,reach_step,success_1..K,
+/// dist_1..K` (empty fields where a task has fewer pairs or the object was never reached), with a
+/// header.
 pub fn episodes_csv(episodes: &[EpisodeEval]) -> String {
     let k = episodes.iter().map(|e| e.success.len()).max().unwrap_or(0);
-    let mut out = String::from("task_id,seed,steps,fell,physics_invalid");
+    let mut out = String::from("task_id,seed,steps,fell,physics_invalid,reach_step");
     for i in 1..=k {
         out.push_str(&format!(",success_{i}"));
     }
@@ -437,12 +457,13 @@ pub fn episodes_csv(episodes: &[EpisodeEval]) -> String {
     out.push('\n');
     for e in episodes {
         out.push_str(&format!(
-            "{},{},{},{},{}",
+            "{},{},{},{},{},{}",
             e.task_id,
             e.seed,
             e.steps,
             u8::from(e.fell),
-            u8::from(e.physics_invalid)
+            u8::from(e.physics_invalid),
+            e.reach_step.map(|k| k.to_string()).unwrap_or_default()
         ));
         for i in 0..k {
             out.push(',');
@@ -494,6 +515,7 @@ mod tests {
             fell,
             physics_invalid: false,
             steps: 10,
+            reach_step: (!fell).then_some(7),
         }
     }
 
@@ -516,6 +538,8 @@ mod tests {
         assert!((t.dist[1].mean - (0.3 + 2.0) / 2.0).abs() < 1e-6);
         assert!((t.fall_rate.mean - 0.75).abs() < 1e-12);
         assert_eq!((t.steps.mean, t.steps.std), (10.0, 0.0));
+        // Seed 0 reached in one of two episodes, seed 1 in none.
+        assert!((t.reach_rate.mean - 0.25).abs() < 1e-12);
         let flat = t.flat();
         for key in [
             "success_1",
@@ -524,6 +548,7 @@ mod tests {
             "dist_1",
             "dist_2",
             "mean_steps",
+            "reach_rate",
         ] {
             assert!(flat.contains_key(key), "{key}");
         }
@@ -547,9 +572,9 @@ mod tests {
         assert_eq!(t.success_all.mean, 0.5);
         let csv = episodes_csv(&eps);
         assert!(csv.starts_with(
-            "task_id,seed,steps,fell,physics_invalid,success_1,success_2,success_3,dist_1"
+            "task_id,seed,steps,fell,physics_invalid,reach_step,success_1,success_2,success_3,dist_1"
         ));
-        assert!(csv.contains("t0,0,10,0,0,1,,,0.1000,,\n"), "{csv}");
+        assert!(csv.contains("t0,0,10,0,0,7,1,,,0.1000,,\n"), "{csv}");
     }
 
     #[test]

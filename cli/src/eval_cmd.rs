@@ -342,6 +342,11 @@ pub fn run(a: EvalArgs) -> Result<()> {
             table.steps.mean,
             table.steps.std
         );
+        println!(
+            "episodes whose root came within the reach distance of its object: {:.1} ± {:.1} %",
+            100.0 * table.reach_rate.mean,
+            100.0 * table.reach_rate.std
+        );
     }
     Ok(())
 }

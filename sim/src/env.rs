@@ -17,7 +17,7 @@ use crate::task::terminations::{fall_exempt, fallen, placement_error};
 use crate::world::{SimConfig, Snapshot, World};
 use lhm_scenes::geometry::Rect;
 use lhm_scenes::routes::obstacle_rect;
-use lhm_scenes::{Catalogue, Task};
+use lhm_scenes::{Catalogue, Support, Task};
 use rapier3d::math::Rotation;
 use rapier3d::math::Vector;
 use serde::{Deserialize, Serialize};
@@ -85,6 +85,38 @@ pub struct EnvConfig {
     /// walk's falls without the room's), as the anchors pretrain locomotion on flat ground; the
     /// task's reach and placement terms then measure nothing.
     pub empty_room: bool,
+    /// The task's furniture removed ([`without_furniture`]), its walls, start and objects where
+    /// the task has them (an object or goal on furniture put on the floor below it): the walk to
+    /// the object and its reach, without the furniture a character that cannot yet avoid it
+    /// trips over. A training aid between `empty_room` and the task's own room.
+    pub clear_furniture: bool,
+}
+
+/// The room of `task` without its furniture ([`EnvConfig::clear_furniture`]): walls, start and
+/// objects kept; an object or goal that rested on furniture rests on the floor below it.
+pub fn without_furniture(task: &Task) -> Task {
+    let mut task = task.clone();
+    task.obstacles.clear();
+    for o in &mut task.objects {
+        if o.on != Support::Floor {
+            o.on = Support::Floor;
+            o.pos[2] = o.size[2] / 2.0;
+        }
+    }
+    let heights: Vec<(String, f64)> = task
+        .objects
+        .iter()
+        .map(|o| (o.id.clone(), o.size[2] / 2.0))
+        .collect();
+    for step in &mut task.sequence {
+        if step.on != Support::Floor {
+            step.on = Support::Floor;
+            if let Some((_, h)) = heights.iter().find(|(id, _)| *id == step.object) {
+                step.goal[2] = *h;
+            }
+        }
+    }
+    task
 }
 
 /// The room of `task` emptied ([`EnvConfig::empty_room`]): no furniture, walls at ±30 m, every
@@ -173,6 +205,7 @@ impl Default for EnvConfig {
             skills: None,
             gait: None,
             empty_room: false,
+            clear_furniture: false,
         }
     }
 }
@@ -298,6 +331,9 @@ impl TaskEnv {
         let emptied;
         let task = if config.empty_room {
             emptied = empty_room(task);
+            &emptied
+        } else if config.clear_furniture {
+            emptied = without_furniture(task);
             &emptied
         } else {
             task

@@ -2,8 +2,8 @@
 //! (no downloads): feedback terms on known errors, the cycle's sampling, and the environment's
 //! residual actions and phase observation.
 
-use lhm_scenes::Benchmark;
-use lhm_sim::env::{empty_room, EnvConfig, GaitConfig, TaskEnv};
+use lhm_scenes::{Benchmark, Support};
+use lhm_sim::env::{empty_room, without_furniture, EnvConfig, GaitConfig, TaskEnv};
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
     aligned_to, base_targets, braking_targets, reference_for, BalanceGains, GaitReference, Rig,
@@ -521,4 +521,37 @@ fn an_empty_room_has_no_furniture_and_its_objects_far_along_x() {
         assert_eq!((a.pos[1], a.pos[2]), (b.pos[1], b.pos[2]));
     }
     assert_eq!(empty.start.pos, task.start.pos);
+}
+
+#[test]
+fn a_room_without_furniture_keeps_walls_start_and_objects_and_puts_raised_ones_on_the_floor() {
+    let bench = Benchmark::embedded().unwrap();
+    // A task with an object on furniture.
+    let task = bench
+        .all_tasks()
+        .map(|(_, t)| t)
+        .find(|t| t.objects.iter().any(|o| o.on != Support::Floor))
+        .expect("the benchmark has an object on furniture");
+    let bare = without_furniture(task);
+    assert!(bare.obstacles.is_empty());
+    assert_eq!(bare.room_size, task.room_size);
+    assert_eq!(bare.start.pos, task.start.pos);
+    for (a, b) in bare.objects.iter().zip(&task.objects) {
+        assert_eq!(a.on, Support::Floor);
+        assert_eq!((a.pos[0], a.pos[1]), (b.pos[0], b.pos[1]));
+        assert_eq!(a.pos[2], b.size[2] / 2.0, "{} rests on the floor", a.id);
+        if b.on == Support::Floor {
+            assert_eq!(a.pos, b.pos);
+        }
+    }
+    for (a, b) in bare.sequence.iter().zip(&task.sequence) {
+        assert_eq!(a.on, Support::Floor);
+        assert_eq!((a.goal[0], a.goal[1]), (b.goal[0], b.goal[1]));
+        if b.on == Support::Floor {
+            assert_eq!(a.goal, b.goal);
+        } else {
+            let o = task.objects.iter().find(|o| o.id == a.object).unwrap();
+            assert_eq!(a.goal[2], o.size[2] / 2.0);
+        }
+    }
 }
