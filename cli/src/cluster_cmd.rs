@@ -278,12 +278,18 @@ fn progress_message(r: &IterationReport) -> String {
         }
     };
     let disc = r.disc_accuracy.map_or("-".into(), |a| format!("{a:.2}"));
+    // Reach from task starts; a run whose episodes all start from clip frames (every gait run)
+    // has none, so it shows the reach over all its episodes, marked as such.
+    let reach = if r.reach_rate.is_finite() || !r.reach_rate_all.is_finite() {
+        pct(r.reach_rate)
+    } else {
+        format!("{} (all starts)", pct(r.reach_rate_all))
+    };
     format!(
-        "| {:.0} samples/s | return {:.2} | success {success} | falls {} | reach {} | disc {disc} | style {:.3} | {} episodes | {} actors",
+        "| {:.0} samples/s | return {:.2} | success {success} | falls {} | reach {reach} | disc {disc} | style {:.3} | {} episodes | {} actors",
         r.samples_per_s,
         r.mean_return,
         pct(r.fall_fraction),
-        pct(r.reach_rate),
         r.style_reward,
         r.episodes,
         r.actors_alive
@@ -578,5 +584,38 @@ pub fn actor(args: ActorArgs) -> Result<()> {
             Ok(())
         }
         Err(e) => Err(e.into()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(reach_rate: f64, reach_rate_all: f64) -> IterationReport {
+        IterationReport {
+            iteration: 3,
+            samples: 100,
+            samples_per_s: 50.0,
+            mean_return: 1.0,
+            success_rate: f64::NAN,
+            episodes: 4,
+            actors_alive: 2,
+            update_s: 0.1,
+            disc_accuracy: None,
+            style_reward: 0.0,
+            task_reward: 0.5,
+            fall_fraction: 0.5,
+            reach_rate,
+            reach_rate_all,
+        }
+    }
+
+    #[test]
+    fn the_progress_line_shows_reach_from_task_starts_or_else_over_all_starts() {
+        assert!(progress_message(&report(0.25, 0.75)).contains("| reach 25% |"));
+        // A gait run: no task starts, so the reach over all starts, labelled.
+        assert!(progress_message(&report(f64::NAN, 0.75)).contains("| reach 75% (all starts) |"));
+        // No episodes at all: nothing to show.
+        assert!(progress_message(&report(f64::NAN, f64::NAN)).contains("| reach - |"));
     }
 }

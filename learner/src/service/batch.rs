@@ -46,6 +46,11 @@ impl EpisodeSummary {
     pub fn reach_rate(&self) -> f64 {
         self.task_start_reached as f64 / self.task_start_episodes as f64
     }
+
+    /// Reach rate over every finished episode, whatever its start (NaN with none).
+    pub fn reach_rate_all(&self) -> f64 {
+        self.reached as f64 / self.episodes as f64
+    }
 }
 
 pub struct Assembled {

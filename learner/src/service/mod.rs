@@ -383,6 +383,9 @@ pub struct IterationReport {
     pub fall_fraction: f64,
     /// Over episodes from task starts.
     pub reach_rate: f64,
+    /// Over every finished episode, demo and gait starts too (with `[env.gait]` every episode
+    /// starts in the gait, so `reach_rate` has none to count).
+    pub reach_rate_all: f64,
 }
 
 /// What `status.json` holds after every iteration (tests and people read it).
@@ -970,6 +973,7 @@ pub fn run_learner(
             task_reward: s.mean_task_reward,
             fall_fraction: s.fall_fraction(),
             reach_rate: s.reach_rate(),
+            reach_rate_all: s.reach_rate_all(),
         };
         if let Some(csv) = metrics_csv.as_mut() {
             let wall_s = run_started.elapsed().as_secs_f64();
@@ -1158,7 +1162,7 @@ fn append_metrics_row(
         ("fall_fraction", report.fall_fraction),
         ("task_start_fall_fraction", s.task_start_fall_fraction()),
         ("reach_rate", report.reach_rate),
-        ("reach_rate_all", s.reached as f64 / s.episodes as f64),
+        ("reach_rate_all", s.reach_rate_all()),
         ("disc_accuracy", report.disc_accuracy.unwrap_or(f64::NAN)),
         ("style_reward", s.mean_style_reward),
         ("task_reward", s.mean_task_reward),
