@@ -66,6 +66,11 @@ pub struct RenderRolloutArgs {
     /// Seed of the random and stochastic policies.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Start as `lhm eval`'s seed S of this task does (its `episodes.csv` rows): the start heading
+    /// turned by the seed, and in a gait run (`[env.gait]`) the cycle step drawn from the seed.
+    /// Default: the task as specified, in a gait run at the cycle's first step.
+    #[arg(long, value_name = "S")]
+    eval_seed: Option<u64>,
     /// Start from a reference-motion frame instead of the task's start pose, as training's demo
     /// starts do: `CLIP` (an installed clip's name, e.g. walk_forward) at `SECONDS` into it
     /// (default 0.5), turned toward the first object. Walking clips: an OMOMO clip starts without
@@ -136,6 +141,10 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
     let (_, task) = bench
         .task(&a.task)
         .with_context(|| format!("no task {:?}", a.task))?;
+    let task = match a.eval_seed {
+        Some(seed) => lhm_actor::eval::seeded_task(&task, seed),
+        None => task,
+    };
     let model = CharacterModel::amp_humanoid();
     let trained = !matches!(a.policy.as_str(), "zero" | "random");
     let train = train_config_for(
@@ -181,7 +190,10 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
             lhm_sim::gait::reference_for(&model, &demo, &gait.clip, 1.0 / train.sim.control_hz)
                 .map_err(anyhow::Error::msg)?;
         let yaw = env.yaw_toward_first_object();
-        env.start_in_gait(&demo, std::sync::Arc::new(reference), 0, yaw);
+        let step = a.eval_seed.map_or(0, |seed| {
+            lhm_actor::eval::gait_start_step(&task.id, seed, reference.len())
+        });
+        env.start_in_gait(&demo, std::sync::Arc::new(reference), step, yaw);
     }
     let mut rng = SplitMix64::new(a.seed);
     let mut net_rng = lhm_nets::SplitMix64::new(a.seed);

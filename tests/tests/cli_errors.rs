@@ -232,3 +232,39 @@ fn eval_scores_the_zero_action_under_a_step_cap_and_refuses_bad_caps() {
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
     }
 }
+
+/// `render-rollout --eval-seed S` starts as `lhm eval`'s seed S: seed 0 is the task as
+/// specified (the same still as no seed), a later seed turns the start heading (another still).
+#[test]
+fn render_rollout_starts_as_the_eval_seed_does() {
+    let dir = std::env::temp_dir().join(format!("lhm-eval-seed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let still = |name: &str, seed: Option<&str>| {
+        let png = dir.join(name);
+        let mut cmd = Command::new(lhm());
+        cmd.args(["render-rollout", "train-0001", "--seconds", "0.1", "-o"])
+            .arg(&png);
+        if let Some(s) = seed {
+            cmd.args(["--eval-seed", s]);
+        }
+        let out = cmd.output().expect("running lhm");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        std::fs::read(&png).unwrap()
+    };
+    let plain = still("plain.png", None);
+    assert_eq!(
+        still("seed0.png", Some("0")),
+        plain,
+        "seed 0 is the task as specified"
+    );
+    assert_ne!(
+        still("seed3.png", Some("3")),
+        plain,
+        "seed 3 turns the start heading"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
