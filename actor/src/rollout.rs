@@ -477,7 +477,16 @@ impl Rollout {
             let step = rng.below(gait.len());
             let noise = (2.0 * rng.next_f64() as f32 - 1.0) * self.spec.env.demo_start_yaw_noise;
             let yaw = env.yaw_toward_first_object() + noise;
-            env.start_in_gait(demo, Arc::clone(gait), step, yaw);
+            // Near the object or at the task's start ([env.gait] near_start_fraction); no draw
+            // unless the run mixes the two, so other runs keep their random streams.
+            let near = match self.spec.env.gait.as_ref() {
+                Some(g) if g.start_distance > 0.0 && g.near_start_fraction < 1.0 => {
+                    (rng.next_f64() as f32) < g.near_start_fraction
+                }
+                Some(g) => g.start_distance > 0.0,
+                None => false,
+            };
+            env.start_in_gait_where(demo, Arc::clone(gait), step, yaw, near);
         } else if let Some(demo) = &self.demo {
             let rng = &mut self.rng;
             if (rng.next_f64() as f32) < self.spec.env.demo_start_probability {

@@ -150,6 +150,11 @@ pub struct GaitConfig {
     /// Starts this far (m, horizontally) before the first object, heading at it, instead of at
     /// the task's start: episodes about the stop alone. 0: the task's start.
     pub start_distance: f32,
+    /// With `start_distance` > 0: the fraction of the actors' episodes that start there; the
+    /// others start at the task's start (a walk to the object, then the stop), so a run can
+    /// practise the stop without forgetting the walk. `lhm eval` and `render-rollout` always start
+    /// at `start_distance` when it is set.
+    pub near_start_fraction: f32,
     pub gains: BalanceGains,
 }
 
@@ -164,6 +169,7 @@ impl Default for GaitConfig {
             steer_max: 0.2,
             stop_distance: 0.0,
             start_distance: 0.0,
+            near_start_fraction: 1.0,
             gains: BalanceGains::default(),
         }
     }
@@ -491,11 +497,29 @@ impl TaskEnv {
         step: usize,
         yaw: f32,
     ) -> bool {
+        let near = self
+            .config
+            .gait
+            .as_ref()
+            .is_some_and(|g| g.start_distance > 0.0);
+        self.start_in_gait_where(demo, reference, step, yaw, near)
+    }
+
+    /// [`Self::start_in_gait`] at `[env.gait] start_distance` before the first object when
+    /// `near` (and that distance is set), else at the task's start.
+    pub fn start_in_gait_where(
+        &mut self,
+        demo: &DemoMotion,
+        reference: Arc<GaitReference>,
+        step: usize,
+        yaw: f32,
+        near: bool,
+    ) -> bool {
         let Some(config) = self.config.gait.as_ref().filter(|_| self.rig.is_some()) else {
             return false;
         };
         let mut at = [self.task.start.pos[0] as f32, self.task.start.pos[1] as f32];
-        if let (Some(o), true) = (self.first_object(), config.start_distance > 0.0) {
+        if let (Some(o), true) = (self.first_object(), near && config.start_distance > 0.0) {
             // `start_distance` before the first object, on the line the heading points along.
             at = [
                 o.pos[0] as f32 - config.start_distance * yaw.cos(),

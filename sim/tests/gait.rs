@@ -319,6 +319,20 @@ fn a_start_distance_starts_the_gait_that_far_before_the_first_object_heading_at_
         (root.pos - task_start).length() > 0.1,
         "not the task's start"
     );
+    // Not near (a mixed run's other episodes): the task's start, whatever the distance.
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let mut env = gait_env(
+        &model,
+        Some(GaitConfig {
+            start_distance: 1.5,
+            near_start_fraction: 0.5,
+            ..GaitConfig::default()
+        }),
+    );
+    assert!(env.start_in_gait_where(&demo, reference, 0, yaw, false));
+    let root = env.world.body_states()[0];
+    let off = Vector::new(root.pos.x - task_start.x, root.pos.y - task_start.y, 0.0);
+    assert!(off.length() < 0.02, "{}", off.length());
 }
 
 /// `cycle_clip` with the swinging leg's knee bent, so the feet take turns being lower.

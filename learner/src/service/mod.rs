@@ -232,6 +232,13 @@ impl TrainConfig {
                 )));
             }
         }
+        if let Some(f) = self.env.gait.as_ref().map(|g| g.near_start_fraction) {
+            if !(0.0..=1.0).contains(&f) {
+                return Err(ServiceError::Config(format!(
+                    "env.gait.near_start_fraction must be between 0 and 1, got {f}"
+                )));
+            }
+        }
         if self.role == "vla" {
             let vla = self.network.policy.vla.as_ref().ok_or_else(|| {
                 ServiceError::Config(
@@ -1357,6 +1364,33 @@ mod tests {
             .collect();
         assert_eq!(roles, vec![Role::Teacher1, Role::Teacher2]);
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_near_start_fraction_outside_zero_to_one_is_refused_by_name() {
+        let mut config = TrainConfig::default();
+        for (f, ok) in [
+            (0.0, true),
+            (0.5, true),
+            (1.0, true),
+            (1.5, false),
+            (-0.1, false),
+        ] {
+            config.env.gait = Some(lhm_sim::env::GaitConfig {
+                near_start_fraction: f,
+                ..Default::default()
+            });
+            let result = config.check();
+            assert_eq!(result.is_ok(), ok, "{f}: {result:?}");
+            if let Err(e) = result {
+                assert!(e.to_string().contains("near_start_fraction"), "{e}");
+            }
+        }
+        config.env.gait = Some(lhm_sim::env::GaitConfig {
+            near_start_fraction: f32::NAN,
+            ..Default::default()
+        });
+        assert!(config.check().is_err(), "NaN");
     }
 
     /// A run directory made by another role is refused before anything in it changes.
