@@ -103,16 +103,11 @@ pub fn without_furniture(task: &Task) -> Task {
             o.pos[2] = o.size[2] / 2.0;
         }
     }
-    let heights: Vec<(String, f64)> = task
-        .objects
-        .iter()
-        .map(|o| (o.id.clone(), o.size[2] / 2.0))
-        .collect();
     for step in &mut task.sequence {
         if step.on != Support::Floor {
             step.on = Support::Floor;
-            if let Some((_, h)) = heights.iter().find(|(id, _)| *id == step.object) {
-                step.goal[2] = *h;
+            if let Some(o) = task.objects.iter().find(|o| o.id == step.object) {
+                step.goal[2] = o.size[2] / 2.0;
             }
         }
     }
