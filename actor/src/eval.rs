@@ -131,6 +131,9 @@ pub struct EvalSetup<'a> {
 pub struct GaitStart<'a> {
     pub demo: &'a lhm_sim::motion::demo::DemoMotion,
     pub reference: std::sync::Arc<lhm_sim::gait::GaitReference>,
+    /// Every episode starts at rest at the task's start ([`TaskEnv::start_at_rest_in_gait`],
+    /// `[env.gait] rest_start_fraction`'s start) instead of walking.
+    pub rest: bool,
 }
 
 impl EvalSetup<'_> {
@@ -150,7 +153,11 @@ impl EvalSetup<'_> {
         if let Some(g) = &self.gait {
             let yaw = env.yaw_toward_first_object();
             let step = gait_start_step(&task.id, seed, g.reference.len());
-            env.start_in_gait(g.demo, std::sync::Arc::clone(&g.reference), step, yaw);
+            if g.rest {
+                env.start_at_rest_in_gait(std::sync::Arc::clone(&g.reference), step, yaw);
+            } else {
+                env.start_in_gait(g.demo, std::sync::Arc::clone(&g.reference), step, yaw);
+            }
         }
         env
     }

@@ -477,8 +477,19 @@ impl Rollout {
             let step = rng.below(gait.len());
             let noise = (2.0 * rng.next_f64() as f32 - 1.0) * self.spec.env.demo_start_yaw_noise;
             let yaw = env.yaw_toward_first_object() + noise;
-            // Near the object or at the task's start ([env.gait] near_start_fraction); no draw
-            // unless the run mixes the two, so other runs keep their random streams.
+            // At rest ([env.gait] rest_start_fraction), else near the object or at the task's
+            // start (near_start_fraction); no draw unless the run mixes them, so other runs keep
+            // their random streams.
+            let rest = match self.spec.env.gait.as_ref() {
+                Some(g) if g.rest_start_fraction > 0.0 => {
+                    (rng.next_f64() as f32) < g.rest_start_fraction
+                }
+                _ => false,
+            };
+            if rest {
+                env.start_at_rest_in_gait(Arc::clone(gait), step, yaw);
+                return env;
+            }
             let near = match self.spec.env.gait.as_ref() {
                 Some(g) if g.start_distance > 0.0 && g.near_start_fraction < 1.0 => {
                     (rng.next_f64() as f32) < g.near_start_fraction

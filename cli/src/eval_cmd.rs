@@ -63,6 +63,11 @@ pub struct EvalArgs {
     /// error for a state-based policy, which hears no instruction.
     #[arg(long)]
     pub(crate) no_language: bool,
+    /// In a run with `[env.gait]`: start every episode at rest, standing still at the task's
+    /// start turned toward the first object (`rest_start_fraction`'s start), instead of walking
+    /// (at `start_distance` before the object when the config sets it). An error without a gait.
+    #[arg(long)]
+    pub(crate) from_rest: bool,
     #[command(flatten)]
     pub(crate) scenes: crate::scenes_cmd::Source,
 }
@@ -222,7 +227,11 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 lhm_sim::gait::reference_for(&model, demo, &g.clip, 1.0 / train.sim.control_hz)
                     .map_err(anyhow::Error::msg)?,
             ),
+            rest: a.from_rest,
         }),
+        _ if a.from_rest => {
+            anyhow::bail!("--from-rest starts the gait at rest: the run's config has no [env.gait]")
+        }
         _ => None,
     };
     let setup = EvalSetup {
@@ -259,6 +268,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         "tasks": tasks.len(),
         "seeds": a.seeds,
         "max_steps": a.max_steps,
+        "from_rest": a.from_rest,
         "episodes": table.episodes,
         "start_yaw_jitter_rad": START_YAW_JITTER,
         "wall_s": wall,

@@ -597,6 +597,7 @@ fn evaluate(
                 gifs: 0,
                 max_steps: None,
                 no_language: row.no_language,
+                from_rest: false,
                 scenes: scenes.clone(),
             })
             .with_context(|| format!("eval {split} {}", row.name))?;

@@ -71,6 +71,10 @@ pub struct RenderRolloutArgs {
     /// Default: the task as specified, in a gait run at the cycle's first step.
     #[arg(long, value_name = "S")]
     eval_seed: Option<u64>,
+    /// In a run with `[env.gait]`: start at rest, standing still at the task's start turned
+    /// toward the first object, as `lhm eval --from-rest` does.
+    #[arg(long, conflicts_with = "demo_start")]
+    from_rest: bool,
     /// Start from a reference-motion frame instead of the task's start pose, as training's demo
     /// starts do: `CLIP` (an installed clip's name, e.g. walk_forward) at `SECONDS` into it
     /// (default 0.5), turned toward the first object. Walking clips: an OMOMO clip starts without
@@ -193,7 +197,13 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         let step = a.eval_seed.map_or(0, |seed| {
             lhm_actor::eval::gait_start_step(&task.id, seed, reference.len())
         });
-        env.start_in_gait(&demo, std::sync::Arc::new(reference), step, yaw);
+        if a.from_rest {
+            env.start_at_rest_in_gait(std::sync::Arc::new(reference), step, yaw);
+        } else {
+            env.start_in_gait(&demo, std::sync::Arc::new(reference), step, yaw);
+        }
+    } else if a.from_rest {
+        anyhow::bail!("--from-rest starts the gait at rest: the run's config has no [env.gait]");
     }
     let mut rng = SplitMix64::new(a.seed);
     let mut net_rng = lhm_nets::SplitMix64::new(a.seed);

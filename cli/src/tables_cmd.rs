@@ -294,6 +294,7 @@ fn evaluation(
         gifs: 0,
         max_steps: None,
         no_language: false,
+        from_rest: false,
         scenes: args.scenes.clone(),
     })
     .with_context(|| format!("{} on {split}", row.name))?;

@@ -150,6 +150,12 @@ pub struct GaitConfig {
     /// practise the stop without forgetting the walk. `lhm eval` and `render-rollout` always start
     /// at `start_distance` when it is set.
     pub near_start_fraction: f32,
+    /// The fraction of the actors' episodes that start at rest: the task's own standing start
+    /// (still, in the neutral pose) turned toward the first object, the gait running from its
+    /// cycle step as in the other starts — the walk must begin without the clip's momentum, as
+    /// the task asks. Drawn before `near_start_fraction`; 0: never (`lhm eval --from-rest` and
+    /// `render-rollout --from-rest` start every episode so).
+    pub rest_start_fraction: f32,
     pub gains: BalanceGains,
 }
 
@@ -165,6 +171,7 @@ impl Default for GaitConfig {
             stop_distance: 0.0,
             start_distance: 0.0,
             near_start_fraction: 1.0,
+            rest_start_fraction: 0.0,
             gains: BalanceGains::default(),
         }
     }
@@ -522,6 +529,45 @@ impl TaskEnv {
             ];
         }
         self.start_from_demo_at(demo, reference.clip, reference.time(step), at, yaw);
+        self.start_gait(reference, step)
+    }
+
+    /// A start at rest in the gait: the character stands still where the task starts it (the
+    /// neutral pose of a freshly built world), turned about its root to `yaw`, and the gait runs
+    /// from cycle step `step` ([`Self::start_gait`]). For a fresh environment (before its first
+    /// step); `false`, and nothing changes, where [`Self::start_gait`] would refuse.
+    pub fn start_at_rest_in_gait(
+        &mut self,
+        reference: Arc<GaitReference>,
+        step: usize,
+        yaw: f32,
+    ) -> bool {
+        if self.config.gait.is_none() || self.rig.is_none() || reference.is_empty() {
+            return false;
+        }
+        let standing = self.world.body_states();
+        let Some(root) = standing.first().copied() else {
+            return false;
+        };
+        let turn = Rotation::from_rotation_z(yaw - crate::obs::heading_yaw(root.rot));
+        let origin = Vector::new(root.pos.x, root.pos.y, 0.0);
+        let turned: Vec<BodyState> = standing
+            .iter()
+            .map(|b| BodyState {
+                pos: origin + turn * (b.pos - origin),
+                rot: (turn * b.rot).normalize(),
+                linvel: Vector::ZERO,
+                angvel: Vector::ZERO,
+            })
+            .collect();
+        let pose = KinematicPose {
+            root_pos: turned[0].pos,
+            root_rot: turned[0].rot,
+            local_rots: vec![Rotation::IDENTITY; self.model.bodies.len()],
+        };
+        self.world.set_character_state(&pose, &turned);
+        self.amp.fill(vec![amp_frame(&self.model, &turned)]);
+        self.prev_bodies = turned;
         self.start_gait(reference, step)
     }
 

@@ -335,6 +335,42 @@ fn a_start_distance_starts_the_gait_that_far_before_the_first_object_heading_at_
     assert!(off.length() < 0.02, "{}", off.length());
 }
 
+#[test]
+fn a_rest_start_stands_still_at_the_tasks_start_turned_toward_the_object_with_the_gait_running() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let mut env = gait_env(&model, Some(GaitConfig::default()));
+    let built = env.world.body_states();
+    let yaw = env.yaw_toward_first_object() + 0.3;
+    assert!(!env.gait_running());
+    assert!(env.start_at_rest_in_gait(reference, 5, yaw));
+    assert!(env.gait_running());
+    let now = env.world.body_states();
+    // Where the task starts it, at the same height, facing `yaw`, still.
+    let (r0, r1) = (built[0].pos, now[0].pos);
+    assert!((r1 - r0).length() < 1e-3, "{r0:?} -> {r1:?}");
+    let forward = now[0].rot * Vector::X;
+    assert!((forward.y.atan2(forward.x) - yaw).abs() < 0.02);
+    for b in &now {
+        assert!(b.linvel.length() < 1e-3 && b.angvel.length() < 1e-3);
+    }
+    // The neutral pose: every body keeps its height and its distance from the root.
+    for (a, b) in built.iter().zip(&now) {
+        assert!((a.pos.z - b.pos.z).abs() < 1e-3);
+        let (da, db) = (a.pos - built[0].pos, b.pos - now[0].pos);
+        assert!((da.length() - db.length()).abs() < 1e-3);
+    }
+    // Not the demo's walking start, so its falls and reaches count as the task's start.
+    assert!(!env.demo_start);
+    // Without [env.gait] nothing changes.
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let mut plain = gait_env(&model, None);
+    let before = plain.world.body_states();
+    assert!(!plain.start_at_rest_in_gait(reference, 0, yaw));
+    assert_eq!(plain.world.body_states()[0].rot, before[0].rot);
+}
+
 /// `cycle_clip` with the swinging leg's knee bent, so the feet take turns being lower.
 fn stepping_demo(model: &CharacterModel) -> DemoMotion {
     let (rs, ls) = (

@@ -221,6 +221,8 @@ fn eval_scores_the_zero_action_under_a_step_cap_and_refuses_bad_caps() {
     for (args, expected) in [
         (vec!["--max-steps", "0"], "--max-steps"),
         (vec!["--teacher1", "zero"], "--teacher1"),
+        // The built-in default has no gait to start at rest.
+        (vec!["--from-rest"], "[env.gait]"),
     ] {
         let out = Command::new(lhm())
             .args(["eval", "--policy", "zero", "--limit", "1"])

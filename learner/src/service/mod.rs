@@ -232,11 +232,16 @@ impl TrainConfig {
                 )));
             }
         }
-        if let Some(f) = self.env.gait.as_ref().map(|g| g.near_start_fraction) {
-            if !(0.0..=1.0).contains(&f) {
-                return Err(ServiceError::Config(format!(
-                    "env.gait.near_start_fraction must be between 0 and 1, got {f}"
-                )));
+        if let Some(g) = self.env.gait.as_ref() {
+            for (name, f) in [
+                ("near_start_fraction", g.near_start_fraction),
+                ("rest_start_fraction", g.rest_start_fraction),
+            ] {
+                if !(0.0..=1.0).contains(&f) {
+                    return Err(ServiceError::Config(format!(
+                        "env.gait.{name} must be between 0 and 1, got {f}"
+                    )));
+                }
             }
         }
         if self.role == "vla" {
@@ -1367,30 +1372,33 @@ mod tests {
     }
 
     #[test]
-    fn a_near_start_fraction_outside_zero_to_one_is_refused_by_name() {
+    fn a_start_fraction_outside_zero_to_one_is_refused_by_name() {
         let mut config = TrainConfig::default();
-        for (f, ok) in [
-            (0.0, true),
-            (0.5, true),
-            (1.0, true),
-            (1.5, false),
-            (-0.1, false),
-        ] {
-            config.env.gait = Some(lhm_sim::env::GaitConfig {
-                near_start_fraction: f,
-                ..Default::default()
-            });
-            let result = config.check();
-            assert_eq!(result.is_ok(), ok, "{f}: {result:?}");
-            if let Err(e) = result {
-                assert!(e.to_string().contains("near_start_fraction"), "{e}");
+        let with = |name: &str, f: f32| {
+            let mut g = lhm_sim::env::GaitConfig::default();
+            match name {
+                "near_start_fraction" => g.near_start_fraction = f,
+                _ => g.rest_start_fraction = f,
+            }
+            Some(g)
+        };
+        for name in ["near_start_fraction", "rest_start_fraction"] {
+            for (f, ok) in [
+                (0.0, true),
+                (0.5, true),
+                (1.0, true),
+                (1.5, false),
+                (-0.1, false),
+                (f32::NAN, false),
+            ] {
+                config.env.gait = with(name, f);
+                let result = config.check();
+                assert_eq!(result.is_ok(), ok, "{name} {f}: {result:?}");
+                if let Err(e) = result {
+                    assert!(e.to_string().contains(name), "{e}");
+                }
             }
         }
-        config.env.gait = Some(lhm_sim::env::GaitConfig {
-            near_start_fraction: f32::NAN,
-            ..Default::default()
-        });
-        assert!(config.check().is_err(), "NaN");
     }
 
     /// A run directory made by another role is refused before anything in it changes.
