@@ -153,11 +153,13 @@ impl EvalSetup<'_> {
         if let Some(g) = &self.gait {
             let yaw = env.yaw_toward_first_object();
             let step = gait_start_step(&task.id, seed, g.reference.len());
-            if g.rest {
-                env.start_at_rest_in_gait(std::sync::Arc::clone(&g.reference), step, yaw);
-            } else {
-                env.start_in_gait(g.demo, std::sync::Arc::clone(&g.reference), step, yaw);
-            }
+            env.start_in_gait_from(
+                g.demo,
+                std::sync::Arc::clone(&g.reference),
+                step,
+                yaw,
+                g.rest,
+            );
         }
         env
     }

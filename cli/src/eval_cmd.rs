@@ -23,8 +23,9 @@ pub struct EvalArgs {
     #[arg(long, default_value = "unseen")]
     pub(crate) split: String,
     /// Seeds per task: seed 0 is the task as specified, later seeds turn the character's start
-    /// heading by up to ±0.2 rad (and, for a run with `[env.gait]`, start the walk at a step of
-    /// its cycle drawn from the seed instead of the first).
+    /// heading by up to ±0.2 rad. For a run with `[env.gait]` every seed starts turned toward the
+    /// first object and only the cycle step differs (seed 0 the first, later ones drawn from the
+    /// seed).
     #[arg(long, default_value_t = 3)]
     pub(crate) seeds: u64,
     /// Only each task's first (object, goal) pair (Teacher 1's setting).

@@ -197,11 +197,13 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         let step = a.eval_seed.map_or(0, |seed| {
             lhm_actor::eval::gait_start_step(&task.id, seed, reference.len())
         });
-        if a.from_rest {
-            env.start_at_rest_in_gait(std::sync::Arc::new(reference), step, yaw);
-        } else {
-            env.start_in_gait(&demo, std::sync::Arc::new(reference), step, yaw);
-        }
+        env.start_in_gait_from(
+            &demo,
+            std::sync::Arc::new(reference),
+            step,
+            yaw,
+            a.from_rest,
+        );
     } else if a.from_rest {
         anyhow::bail!("--from-rest starts the gait at rest: the run's config has no [env.gait]");
     }

@@ -2,7 +2,9 @@
 //! task — observations, reward terms, terminations, cycle switching and the AMP history — wired
 //! together. Each piece stays a small pure function in `obs` and `task`.
 
-use crate::gait::{aligned_to, base_targets, steer, BalanceGains, GaitReference, Rig};
+use crate::gait::{
+    aligned_to, base_targets, start_targets, steer, BalanceGains, GaitReference, Rig, StartRamp,
+};
 use crate::mjcf::{CharacterModel, JointKind};
 use crate::motion::demo::DemoMotion;
 use crate::motion::retarget::KinematicPose;
@@ -157,6 +159,9 @@ pub struct GaitConfig {
     /// `render-rollout --from-rest` start every episode so).
     pub rest_start_fraction: f32,
     pub gains: BalanceGains,
+    /// `[env.gait.start]`: how the base walks off from a start at rest (the default: no ramp,
+    /// the walk's targets from the first step).
+    pub start: StartRamp,
 }
 
 impl Default for GaitConfig {
@@ -173,6 +178,7 @@ impl Default for GaitConfig {
             near_start_fraction: 1.0,
             rest_start_fraction: 0.0,
             gains: BalanceGains::default(),
+            start: StartRamp::default(),
         }
     }
 }
@@ -184,6 +190,8 @@ struct GaitRun {
     step: usize,
     /// The gait came within `stop_distance` of an object and stands from then on.
     stopped: bool,
+    /// After a start at rest: control steps since it ([`StartRamp`] ramps the base in).
+    since_rest: Option<u32>,
 }
 
 impl Default for EnvConfig {
@@ -483,6 +491,7 @@ impl TaskEnv {
             reference,
             step,
             stopped: false,
+            since_rest: None,
         });
         true
     }
@@ -532,6 +541,23 @@ impl TaskEnv {
         self.start_gait(reference, step)
     }
 
+    /// [`Self::start_at_rest_in_gait`] when `rest`, else [`Self::start_in_gait`]: the two starts
+    /// `lhm eval` and `render-rollout` offer.
+    pub fn start_in_gait_from(
+        &mut self,
+        demo: &DemoMotion,
+        reference: Arc<GaitReference>,
+        step: usize,
+        yaw: f32,
+        rest: bool,
+    ) -> bool {
+        if rest {
+            self.start_at_rest_in_gait(reference, step, yaw)
+        } else {
+            self.start_in_gait(demo, reference, step, yaw)
+        }
+    }
+
     /// A start at rest in the gait: the character stands still where the task starts it (the
     /// neutral pose of a freshly built world), turned about its root to `yaw`, and the gait runs
     /// from cycle step `step` ([`Self::start_gait`]). For a fresh environment (before its first
@@ -568,7 +594,11 @@ impl TaskEnv {
         self.world.set_character_state(&pose, &turned);
         self.amp.fill(vec![amp_frame(&self.model, &turned)]);
         self.prev_bodies = turned;
-        self.start_gait(reference, step)
+        let started = self.start_gait(reference, step);
+        if let Some(run) = self.gait.as_mut() {
+            run.since_rest = Some(0);
+        }
+        started
     }
 
     /// The joint angles the gait's reference holds at its next step (the neutral pose's zeros once
@@ -750,11 +780,22 @@ impl TaskEnv {
             run.stopped |= Vector::new(to.x, to.y, 0.0).length() < config.stop_distance;
         }
         let (reference_now, angles) = run.reference.at(run.step);
-        let mut targets = if run.stopped {
-            vec![0.0; self.model.dofs.len()]
-        } else {
-            base_targets(rig, &config.gains, &now, reference_now, angles)
+        let mut targets = match (run.stopped, run.since_rest) {
+            (true, _) => vec![0.0; self.model.dofs.len()],
+            (false, Some(k)) => start_targets(
+                rig,
+                &config.gains,
+                &config.start,
+                k as f32 / self.world.config.control_hz,
+                &now,
+                reference_now,
+                angles,
+            ),
+            (false, None) => base_targets(rig, &config.gains, &now, reference_now, angles),
         };
+        if let Some(k) = run.since_rest.as_mut() {
+            *k = k.saturating_add(1);
+        }
         if let (Some(to), false) = (object, run.stopped) {
             let error = to.y.atan2(to.x);
             steer(

@@ -312,6 +312,113 @@ pub fn braking_targets(
     t
 }
 
+/// How the base walks off from rest (`[env.gait.start]`): over `seconds` the gait ramps in from
+/// the neutral standing pose — its joint angles, the centre-of-mass velocity its feedback asks for
+/// and (from `feedback`) the feedback itself grow from 0 to the walk's — while a lean into the
+/// first step fades out. The base from the task's standing start falls within 22-50 steps from
+/// every cycle phase (RESULTS.md, thirteenth session): it asks at once for the clip's ~1 m/s and
+/// its stride, which a character at rest meets by toppling. Human gait initiation leans first
+/// and shortens the first step; these terms are that, their values found by the gait probe's
+/// search (`SEARCH=start`). `seconds` 0: no ramp (the base as from a walking start).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StartRamp {
+    pub seconds: f32,
+    /// Feedback's share at the ramp's first step, in [0, 1] (it grows to 1 with the ramp).
+    pub feedback: f32,
+    /// The lean at the ramp's first step (radians, fading to 0 with the ramp): both ankles'
+    /// pitch, both hips' pitch, the abdomen's pitch, both knees.
+    pub ankle_lean: f32,
+    pub hip_lean: f32,
+    pub abdomen_lean: f32,
+    pub knee_bend: f32,
+}
+
+impl Default for StartRamp {
+    fn default() -> Self {
+        Self::from_array([0.0; Self::LEN])
+    }
+}
+
+impl StartRamp {
+    pub const LEN: usize = 6;
+
+    pub fn to_array(&self) -> [f32; Self::LEN] {
+        [
+            self.seconds,
+            self.feedback,
+            self.ankle_lean,
+            self.hip_lean,
+            self.abdomen_lean,
+            self.knee_bend,
+        ]
+    }
+
+    pub fn from_array(a: [f32; Self::LEN]) -> Self {
+        Self {
+            seconds: a[0],
+            feedback: a[1],
+            ankle_lean: a[2],
+            hip_lean: a[3],
+            abdomen_lean: a[4],
+            knee_bend: a[5],
+        }
+    }
+
+    pub const NAMES: [&'static str; Self::LEN] = [
+        "seconds",
+        "feedback",
+        "ankle_lean",
+        "hip_lean",
+        "abdomen_lean",
+        "knee_bend",
+    ];
+
+    /// How far the ramp is at `elapsed` seconds after the start, in [0, 1] (1: the walk).
+    pub fn progress(&self, elapsed: f32) -> f32 {
+        if self.seconds > 0.0 && self.seconds.is_finite() {
+            (elapsed / self.seconds).clamp(0.0, 1.0)
+        } else {
+            1.0
+        }
+    }
+}
+
+/// [`base_targets`] `elapsed` seconds after a start at rest, ramped in by `ramp`: at progress `s`
+/// ([`StartRamp::progress`]) the reference's angles times `s`, the feedback against its velocity
+/// times `s` weighted by `feedback + (1 − feedback) s`, and the lean times `1 − s`. At `s = 1` it
+/// is [`base_targets`].
+pub fn start_targets(
+    rig: &Rig,
+    gains: &BalanceGains,
+    ramp: &StartRamp,
+    elapsed: f32,
+    now: &[BodyState],
+    reference_now: &[BodyState],
+    reference_next: &[f32],
+) -> Vec<f32> {
+    let s = ramp.progress(elapsed);
+    let base = braking_targets(rig, gains, now, reference_now, reference_next, s);
+    if s >= 1.0 {
+        return base;
+    }
+    let f = ramp.feedback.clamp(0.0, 1.0);
+    let weight = f + (1.0 - f) * s;
+    let mut t: Vec<f32> = base
+        .iter()
+        .zip(reference_next)
+        .map(|(b, r)| s * r + weight * (b - r))
+        .collect();
+    let lean = 1.0 - s;
+    for leg in 0..2 {
+        t[rig.ankle_y[leg]] += lean * ramp.ankle_lean;
+        t[rig.hip_y[leg]] += lean * ramp.hip_lean;
+        t[rig.knee[leg]] += lean * ramp.knee_bend;
+    }
+    t[rig.abdomen_y] += lean * ramp.abdomen_lean;
+    t
+}
+
 /// Turns the gait by `yaw` (radians, + left), spread over the hips' yaw: the swing hip turns the
 /// leg it is about to land by `yaw`, the stance hip turns the pelvis over the planted foot.
 /// Clamped to ±`max`.

@@ -6,7 +6,8 @@ use lhm_scenes::{Benchmark, Support};
 use lhm_sim::env::{empty_room, without_furniture, EnvConfig, GaitConfig, TaskEnv};
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
-    aligned_to, base_targets, braking_targets, reference_for, BalanceGains, GaitReference, Rig,
+    aligned_to, base_targets, braking_targets, reference_for, start_targets, BalanceGains,
+    GaitReference, Rig, StartRamp,
 };
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
@@ -137,6 +138,69 @@ fn braking_counts_the_reference_speed_it_drops_as_velocity_error() {
         let lat = dof(&model, "right_hip_x");
         assert!((braking[lat] - walking[lat]).abs() < 1e-5);
     }
+}
+
+#[test]
+fn the_start_ramp_goes_from_the_lean_on_the_neutral_pose_to_the_walks_base() {
+    let model = CharacterModel::amp_humanoid();
+    let rig = Rig::new(&model).unwrap();
+    let reference = stride(&model);
+    // The character at rest where the reference walks at 0.8 m/s.
+    let still: Vec<BodyState> = reference
+        .iter()
+        .map(|b| BodyState {
+            linvel: Vector::ZERO,
+            ..*b
+        })
+        .collect();
+    let angles: Vec<f32> = (0..model.dofs.len()).map(|i| 0.01 * i as f32).collect();
+    let g = BalanceGains::default();
+    let ramp = StartRamp {
+        seconds: 1.0,
+        feedback: 0.0,
+        ankle_lean: 0.1,
+        hip_lean: -0.2,
+        abdomen_lean: 0.05,
+        knee_bend: 0.3,
+    };
+    // At its first step: the neutral pose (zeros) with the whole lean, no feedback.
+    let first = start_targets(&rig, &g, &ramp, 0.0, &still, &reference, &angles);
+    for (i, t) in first.iter().enumerate() {
+        let want = match model.dofs[i].name.as_str() {
+            "right_ankle_y" | "left_ankle_y" => 0.1,
+            "right_hip_y" | "left_hip_y" => -0.2,
+            "abdomen_y" => 0.05,
+            "right_knee" | "left_knee" => 0.3,
+            _ => 0.0,
+        };
+        assert!(
+            (t - want).abs() < 1e-6,
+            "{}: {t} vs {want}",
+            model.dofs[i].name
+        );
+    }
+    // Half way: half the reference's angles, half the lean, the feedback at half weight
+    // against half the reference's velocity.
+    let half = start_targets(&rig, &g, &ramp, 0.5, &still, &reference, &angles);
+    let braking = braking_targets(&rig, &g, &still, &reference, &angles, 0.5);
+    let knee = dof(&model, "left_knee");
+    let want = 0.5 * angles[knee] + 0.5 * (braking[knee] - angles[knee]) + 0.5 * 0.3;
+    assert!((half[knee] - want).abs() < 1e-6, "{} vs {want}", half[knee]);
+    // At and after its end: the walk's base, exactly; and no ramp at all is the base at once.
+    let base = base_targets(&rig, &g, &still, &reference, &angles);
+    assert_eq!(
+        start_targets(&rig, &g, &ramp, 1.0, &still, &reference, &angles),
+        base
+    );
+    assert_eq!(
+        start_targets(&rig, &g, &ramp, 7.0, &still, &reference, &angles),
+        base
+    );
+    let none = StartRamp::default();
+    assert_eq!(
+        start_targets(&rig, &g, &none, 0.0, &still, &reference, &angles),
+        base
+    );
 }
 
 /// 1.2 s at 30 fps: a stepping cycle (the feet take turns being lower) that moves forward.
@@ -369,6 +433,46 @@ fn a_rest_start_stands_still_at_the_tasks_start_turned_toward_the_object_with_th
     let before = plain.world.body_states();
     assert!(!plain.start_at_rest_in_gait(reference, 0, yaw));
     assert_eq!(plain.world.body_states()[0].rot, before[0].rot);
+}
+
+#[test]
+fn the_start_ramp_acts_after_a_rest_start_and_not_after_a_walking_one() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let ramped = GaitConfig {
+        start: StartRamp {
+            seconds: 1.0,
+            knee_bend: 0.5,
+            ..StartRamp::default()
+        },
+        ..GaitConfig::default()
+    };
+    let zero = vec![0.0; model.dofs.len()];
+    let knee = dof(&model, "left_knee");
+    let after_a_step = |config: &GaitConfig, rest: bool| {
+        let mut env = gait_env(&model, Some(config.clone()));
+        let yaw = env.yaw_toward_first_object();
+        if rest {
+            assert!(env.start_at_rest_in_gait(Arc::clone(&reference), 5, yaw));
+        } else {
+            assert!(env.start_in_gait(&demo, Arc::clone(&reference), 5, yaw));
+        }
+        for _ in 0..3 {
+            env.step(&zero);
+        }
+        env.world.body_states()
+    };
+    let plain = GaitConfig::default();
+    // From rest the ramp's bent knees show after a few steps ...
+    let (bent, straight) = (after_a_step(&ramped, true), after_a_step(&plain, true));
+    let (a, b) = (
+        joint_angles(&model, &bent)[knee],
+        joint_angles(&model, &straight)[knee],
+    );
+    assert!(a > b + 0.05, "ramped knee {a} vs unramped {b}");
+    // ... and a walking start plays the base as before, the ramp configured or not.
+    assert_eq!(after_a_step(&ramped, false), after_a_step(&plain, false));
 }
 
 /// `cycle_clip` with the swinging leg's knee bent, so the feet take turns being lower.

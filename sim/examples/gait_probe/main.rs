@@ -28,14 +28,16 @@
 //! (after at least `STOP_MIN`, at most `STOP_WAIT` steps; `STOP_ON=footfall`: at the
 //! reference's footfall), the pose held with ankle and hip strategies; `SEARCH=stand` (or
 //! `both`) searches the stop's gains instead of (or with) the walk's. `STAND_START=1`: the
-//! rollouts start from the task's standing start (at rest) instead of the clip's state.
+//! rollouts start from the task's standing start (at rest) instead of the clip's state, the gait
+//! ramping in (`StartRamp`); `SEARCH=start` searches the ramp (`seconds,feedback,ankle_lean,…`).
 //! `gait_probe push`: the neutral standing pose (zero action) with every body moving at
 //! 0.1-1.0 m/s forward or sideways — how much momentum standing alone absorbs.
 
 use lhm_scenes::Benchmark;
 use lhm_sim::env::{EnvConfig, GaitConfig, TaskEnv};
 use lhm_sim::gait::{
-    balance, balance_about, braking_targets, steer, BalanceGains, GaitReference, Rig,
+    balance, balance_about, braking_targets, start_targets, steer, BalanceGains, GaitReference,
+    Rig, StartRamp,
 };
 mod stop;
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
@@ -86,6 +88,8 @@ struct Setup {
     /// `ROOMS=1`: each "phase" is a training task instead (`rollout_room`).
     rooms: bool,
     stand_start: bool,
+    /// `HORIZON`: control steps per rollout (default `STEPS`).
+    horizon: usize,
     shared_reference: std::sync::Arc<GaitReference>,
 }
 
@@ -94,12 +98,15 @@ enum Search {
     Walk,
     Stand,
     Both,
+    /// The start from rest's ramp (`StartRamp`; with `STAND_START=1`).
+    Start,
 }
 
 #[derive(Clone, Copy)]
 struct Gains {
     walk: BalanceGains,
     stand: StandGains,
+    start: StartRamp,
 }
 
 impl Setup {
@@ -108,6 +115,7 @@ impl Setup {
             Search::Walk => BalanceGains::LEN,
             Search::Stand => StandGains::LEN,
             Search::Both => BalanceGains::LEN + StandGains::LEN,
+            Search::Start => StartRamp::LEN,
         }
     }
 
@@ -122,6 +130,7 @@ impl Setup {
                 g.walk = walk(v);
                 g.stand = stand(&v[BalanceGains::LEN..]);
             }
+            Search::Start => g.start = StartRamp::from_array(std::array::from_fn(|i| v[i])),
         }
         g
     }
@@ -131,6 +140,7 @@ impl Setup {
             Search::Walk => g.walk.to_array().to_vec(),
             Search::Stand => g.stand.to_array().to_vec(),
             Search::Both => [&g.walk.to_array()[..], &g.stand.to_array()[..]].concat(),
+            Search::Start => g.start.to_array().to_vec(),
         }
     }
 }
@@ -152,7 +162,11 @@ fn rollout_traced(
         return (0, 0.0);
     };
     let phase = s.phase(phase_index);
-    let Gains { walk: gains, stand } = s.gains(g);
+    let Gains {
+        walk: gains,
+        stand,
+        start: ramp,
+    } = s.gains(g);
     let stop_at = s.stop_after.map(|n| n + 7 * phase_index);
     let mut hold: Option<StandHold> = None;
     let k0 = (phase * s.reference.len() as f32) as usize;
@@ -207,6 +221,16 @@ fn rollout_traced(
                 add_brake(&s.rig, &stand, &mut t, &now, reference_now);
                 t
             }
+            // From rest the gait ramps in (`StartRamp`; `seconds` 0: none).
+            None if s.stand_start => start_targets(
+                &s.rig,
+                &gains,
+                &ramp,
+                k as f32 / s.sim.control_hz,
+                &now,
+                reference_now,
+                angles,
+            ),
             None => braking_targets(&s.rig, &gains, &now, reference_now, angles, s.tempo),
         };
         if s.steer_gain != 0.0 && hold.is_none() {
@@ -377,9 +401,9 @@ fn score(s: &Setup, g: &[f32]) -> (f32, usize, f32) {
     let (mut up, mut travel) = (0, 0.0);
     for p in 0..s.phases {
         let (u, t) = if s.rooms {
-            rollout_room(s, g, p, STEPS)
+            rollout_room(s, g, p, s.horizon)
         } else {
-            rollout(s, g, p, STEPS)
+            rollout(s, g, p, s.horizon)
         };
         up += u;
         travel += t;
@@ -466,11 +490,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         search: match std::env::var("SEARCH").as_deref() {
             Ok("stand") => Search::Stand,
             Ok("both") => Search::Both,
+            Ok("start") => Search::Start,
             _ => Search::Walk,
         },
         fixed: Gains {
             walk: BalanceGains::default(),
             stand: StandGains::default(),
+            start: StartRamp::default(),
         },
         empty: std::env::var_os("EMPTY").is_some(),
         stop_on_footfall: std::env::var("STOP_ON").as_deref() == Ok("footfall"),
@@ -482,6 +508,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         phases: env_f32("PHASES", 8.0).max(1.0) as usize,
         rooms: std::env::var_os("ROOMS").is_some(),
         stand_start: std::env::var_os("STAND_START").is_some(),
+        horizon: env_f32("HORIZON", STEPS as f32).max(1.0) as usize,
         shared_reference,
     };
     if push_mode {
@@ -509,7 +536,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let g = parse(&text)?;
         let (total, _, _) = score(&setup, &g);
         for p in (0..setup.phases).filter(|_| setup.rooms) {
-            let (u, r) = rollout_room(&setup, &g, p, STEPS);
+            let (u, r) = rollout_room(&setup, &g, p, setup.horizon);
             println!("room {p}: up {u}, reached {r}");
         }
         for p in (0..setup.phases).filter(|_| !setup.rooms) {
@@ -517,7 +544,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 &setup,
                 &g,
                 p,
-                STEPS,
+                setup.horizon,
                 std::env::var_os("TRACE").is_some(),
                 None,
             );
@@ -528,7 +555,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         if let Ok(path) = std::env::var("GIF") {
             let phase = (env_f32("GIF_PHASE", 0.5) * setup.phases as f32) as usize;
             let mut frames = Vec::new();
-            rollout_traced(&setup, &g, phase, STEPS, false, Some(&mut frames));
+            rollout_traced(&setup, &g, phase, setup.horizon, false, Some(&mut frames));
             write_gif(&frames, 7, std::fs::File::create(path)?)?;
         }
         return Ok(());
@@ -542,7 +569,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (base, up, travel) = score(&setup, &mean);
     println!(
         "start point (zeros: open loop): score {base:.1}, steps up {up} of {}, travel {travel:.2} m",
-        setup.phases * STEPS
+        setup.phases * setup.horizon
     );
     let mut best = (base, mean.clone());
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
@@ -611,19 +638,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Search::Walk => BalanceGains::NAMES.to_vec(),
         Search::Stand => StandGains::NAMES.to_vec(),
         Search::Both => [&BalanceGains::NAMES[..], &StandGains::NAMES[..]].concat(),
+        Search::Start => StartRamp::NAMES.to_vec(),
     };
     for (n, g) in names.iter().zip(&best.1) {
         println!("  {n} = {g:.3}");
     }
     for p in 0..setup.phases {
         println!("trace from phase {}:", setup.phase(p));
-        let (u, t) = rollout_traced(&setup, &best.1, p, STEPS, true, None);
+        let (u, t) = rollout_traced(&setup, &best.1, p, setup.horizon, true, None);
         println!("  up {u}, travel {t:.2}");
     }
     let (_, up, travel) = score(&setup, &best.1);
     println!(
         "best: steps up {up} of {}, travel {travel:.2} m",
-        setup.phases * STEPS
+        setup.phases * setup.horizon
     );
     Ok(())
 }
