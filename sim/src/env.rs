@@ -190,8 +190,9 @@ struct GaitRun {
     step: usize,
     /// The gait came within `stop_distance` of an object and stands from then on.
     stopped: bool,
-    /// After a start at rest: control steps since it ([`StartRamp`] ramps the base in).
-    since_rest: Option<u32>,
+    /// Started at rest: [`StartRamp`] ramps the base in over the episode's first steps (a rest
+    /// start is made on a fresh environment, so the episode's step count is the time since it).
+    from_rest: bool,
 }
 
 impl Default for EnvConfig {
@@ -491,7 +492,7 @@ impl TaskEnv {
             reference,
             step,
             stopped: false,
-            since_rest: None,
+            from_rest: false,
         });
         true
     }
@@ -595,8 +596,8 @@ impl TaskEnv {
         self.amp.fill(vec![amp_frame(&self.model, &turned)]);
         self.prev_bodies = turned;
         let started = self.start_gait(reference, step);
-        if let Some(run) = self.gait.as_mut() {
-            run.since_rest = Some(0);
+        if let Some(run) = self.gait.as_mut().filter(|_| started) {
+            run.from_rest = true;
         }
         started
     }
@@ -780,22 +781,19 @@ impl TaskEnv {
             run.stopped |= Vector::new(to.x, to.y, 0.0).length() < config.stop_distance;
         }
         let (reference_now, angles) = run.reference.at(run.step);
-        let mut targets = match (run.stopped, run.since_rest) {
+        let mut targets = match (run.stopped, run.from_rest) {
             (true, _) => vec![0.0; self.model.dofs.len()],
-            (false, Some(k)) => start_targets(
+            (false, true) => start_targets(
                 rig,
                 &config.gains,
                 &config.start,
-                k as f32 / self.world.config.control_hz,
+                self.steps as f32 / self.world.config.control_hz,
                 &now,
                 reference_now,
                 angles,
             ),
-            (false, None) => base_targets(rig, &config.gains, &now, reference_now, angles),
+            (false, false) => base_targets(rig, &config.gains, &now, reference_now, angles),
         };
-        if let Some(k) = run.since_rest.as_mut() {
-            *k = k.saturating_add(1);
-        }
         if let (Some(to), false) = (object, run.stopped) {
             let error = to.y.atan2(to.x);
             steer(
