@@ -20,7 +20,9 @@
 //!
 //! What a rollout is: `PHASES=n` starts (default 8) on task train-0001 (`EMPTY=1`: its
 //! furniture removed), or `ROOMS=1`: the environment's own `[env.gait]` in the first n training
-//! tasks, steering toward the object, scored as steps up + 100 per room whose object was reached.
+//! tasks, steering toward the object, scored as steps up + 100 per room whose object was reached
+//! (with `EMPTY=1` the rooms' furniture removed, with `STAND_START=1` from the task's standing start).
+//! `THREADS=n` candidates scored at once (default: one per core, at most λ = 16).
 //! A rollout is up while the environment does not call it a fall and the root is above
 //! `UP_HEIGHT` (0.7 m). `TEMPO=x` plays the cycle at x of its speed. The stop (`stop.rs`):
 //! `STOP_AFTER=n` stops the i-th rollout after n + 7 i steps — a braking step against the
@@ -302,17 +304,28 @@ const STEPS: usize = 300;
 /// started at cycle step 7 i toward its first object, as actors and `lhm render-rollout` run it:
 /// (control steps up, 1 if the root came within reach of the object).
 fn rollout_room(s: &Setup, g: &[f32], i: usize, steps: usize) -> (usize, f32) {
-    let Some(task) = s.bench.tasks(lhm_scenes::Split::Train).get(i).cloned() else {
+    let Some(mut task) = s.bench.tasks(lhm_scenes::Split::Train).get(i).cloned() else {
         return (0, 0.0);
     };
+    if s.empty {
+        // EMPTY=1 with ROOMS=1: the room without its furniture (`[env] clear_furniture`).
+        task = lhm_sim::env::without_furniture(&task);
+    }
+    let gains = s.gains(g);
     let mut config = s.env_config.clone();
     config.gait = Some(GaitConfig {
-        gains: s.gains(g).walk,
+        gains: gains.walk,
+        start: gains.start,
         ..GaitConfig::default()
     });
     let mut env = TaskEnv::new(&s.model, &task, &s.bench.catalogue, s.sim.clone(), config);
     let yaw = env.yaw_toward_first_object();
-    env.start_in_gait(&s.demo, s.shared_reference.clone(), 7 * i, yaw);
+    if s.stand_start {
+        // STAND_START=1: the task's standing start, the gait ramping in (`[env.gait.start]`).
+        env.start_at_rest_in_gait(s.shared_reference.clone(), 7 * i, yaw);
+    } else {
+        env.start_in_gait(&s.demo, s.shared_reference.clone(), 7 * i, yaw);
+    }
     let action = vec![0.0; s.model.dofs.len()];
     let mut up = 0;
     for k in 0..steps {
@@ -447,8 +460,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let iterations: usize = args.next().map(|a| a.parse()).transpose()?.unwrap_or(30);
     let clip_name = args.next().unwrap_or_else(|| "humanoid3d_walk".into());
-    let home = std::env::var("HOME").unwrap_or_default();
-    let dir = std::path::PathBuf::from(home).join(".cache/lhm/motions");
+    let dir = lhm_sim::motion::default_dir();
     let model = CharacterModel::amp_humanoid();
     let (env_config, sim) = (EnvConfig::default(), SimConfig::default());
     let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&env_config, &sim))?;
@@ -574,6 +586,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut best = (base, mean.clone());
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let lambda = 16;
+    // THREADS (default: every core, at most λ): candidates scored in parallel.
+    let threads = std::env::var("THREADS")
+        .ok()
+        .and_then(|t| t.parse::<usize>().ok())
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()))
+        .clamp(1, lambda);
     let mut mean_score = base;
     for it in 0..iterations {
         let candidates: Vec<Vec<f32>> = (0..lambda)
@@ -587,7 +605,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .collect();
         let scores: Vec<(f32, usize, f32)> = std::thread::scope(|scope| {
             let halves: Vec<_> = candidates
-                .chunks(lambda / 2)
+                .chunks(lambda.div_ceil(threads))
                 .map(|chunk| {
                     let setup = &setup;
                     scope.spawn(move || chunk.iter().map(|c| score(setup, c)).collect::<Vec<_>>())
