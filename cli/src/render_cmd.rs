@@ -68,7 +68,9 @@ pub struct RenderRolloutArgs {
     seed: u64,
     /// Start as `lhm eval`'s seed S of this task does (its `episodes.csv` rows): the start heading
     /// turned by the seed, and in a gait run (`[env.gait]`) the cycle step drawn from the seed.
-    /// Default: the task as specified, in a gait run at the cycle's first step.
+    /// Default: the task as specified, in a gait run at the cycle's first step. The episode
+    /// itself replays `lhm eval --batch 1`'s: eval's batched forward pass differs in the last
+    /// bits, and a long rollout can drift apart from there.
     #[arg(long, value_name = "S")]
     eval_seed: Option<u64>,
     /// In a run with `[env.gait]`: start at rest, standing still at the task's start turned
