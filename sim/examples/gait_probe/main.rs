@@ -604,14 +604,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
             .collect();
         let scores: Vec<(f32, usize, f32)> = std::thread::scope(|scope| {
-            let halves: Vec<_> = candidates
+            let workers: Vec<_> = candidates
                 .chunks(lambda.div_ceil(threads))
                 .map(|chunk| {
                     let setup = &setup;
                     scope.spawn(move || chunk.iter().map(|c| score(setup, c)).collect::<Vec<_>>())
                 })
                 .collect();
-            halves
+            workers
                 .into_iter()
                 .flat_map(|h| h.join().unwrap_or_default())
                 .collect()
