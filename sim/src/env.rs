@@ -3,7 +3,8 @@
 //! together. Each piece stays a small pure function in `obs` and `task`.
 
 use crate::gait::{
-    aligned_to, base_targets, start_targets, steer, BalanceGains, GaitReference, Rig, StartRamp,
+    aligned_to, base_targets, start_targets, steer, stop_targets, BalanceGains, GaitReference, Rig,
+    StartRamp,
 };
 use crate::mjcf::{CharacterModel, JointKind};
 use crate::motion::demo::DemoMotion;
@@ -141,8 +142,9 @@ pub struct GaitConfig {
     pub steer_gain: f32,
     pub steer_max: f32,
     /// Once the root comes this close (m, horizontally) to the current object the base stops
-    /// walking: its targets become the neutral standing pose (zero joint angles) for the rest of
-    /// the episode, and the phase reads as zeros. 0: never stop.
+    /// walking: its targets become the neutral standing pose (zero joint angles; with a
+    /// `[env.gait.stop]` ramp, after it) for the rest of the episode, and the phase reads as
+    /// zeros. 0: never stop.
     pub stop_distance: f32,
     /// Starts this far (m, horizontally) before the first object, heading at it, instead of at
     /// the task's start: episodes about the stop alone. 0: the task's start.
@@ -162,6 +164,11 @@ pub struct GaitConfig {
     /// `[env.gait.start]`: how the base walks off from a start at rest (the default: no ramp,
     /// the walk's targets from the first step).
     pub start: StartRamp,
+    /// `[env.gait.stop]`: how the base comes to a stand at `stop_distance` — the start's ramp
+    /// run backward ([`crate::gait::stop_targets`]): the walk fades out over `seconds` into the
+    /// neutral pose plus the lean terms, which it then holds with `feedback`'s share of the
+    /// walk's feedback (the default: no ramp, the neutral pose at once).
+    pub stop: StartRamp,
 }
 
 impl Default for GaitConfig {
@@ -179,6 +186,7 @@ impl Default for GaitConfig {
             rest_start_fraction: 0.0,
             gains: BalanceGains::default(),
             start: StartRamp::default(),
+            stop: StartRamp::default(),
         }
     }
 }
@@ -190,6 +198,8 @@ struct GaitRun {
     step: usize,
     /// The gait came within `stop_distance` of an object and stands from then on.
     stopped: bool,
+    /// The episode's step count when it stopped (the stop ramp's clock).
+    stopped_at: u32,
     /// Started at rest: [`StartRamp`] ramps the base in over the episode's first steps (a rest
     /// start is made on a fresh environment, so the episode's step count is the time since it).
     from_rest: bool,
@@ -492,6 +502,7 @@ impl TaskEnv {
             reference,
             step,
             stopped: false,
+            stopped_at: 0,
             from_rest: false,
         });
         true
@@ -777,17 +788,29 @@ impl TaskEnv {
             self.rig.as_ref()?,
             self.config.gait.as_ref()?,
         );
-        if let Some(to) = object {
-            run.stopped |= Vector::new(to.x, to.y, 0.0).length() < config.stop_distance;
+        if let Some(to) = object.filter(|_| !run.stopped) {
+            if Vector::new(to.x, to.y, 0.0).length() < config.stop_distance {
+                run.stopped = true;
+                run.stopped_at = self.steps;
+            }
         }
         let (reference_now, angles) = run.reference.at(run.step);
+        let hz = self.world.config.control_hz;
         let mut targets = match (run.stopped, run.from_rest) {
-            (true, _) => vec![0.0; self.model.dofs.len()],
+            (true, _) => stop_targets(
+                rig,
+                &config.gains,
+                &config.stop,
+                self.steps.saturating_sub(run.stopped_at) as f32 / hz,
+                &now,
+                reference_now,
+                angles,
+            ),
             (false, true) => start_targets(
                 rig,
                 &config.gains,
                 &config.start,
-                self.steps as f32 / self.world.config.control_hz,
+                self.steps as f32 / hz,
                 &now,
                 reference_now,
                 angles,

@@ -398,6 +398,40 @@ pub fn start_targets(
     reference_next: &[f32],
 ) -> Vec<f32> {
     let s = ramp.progress(elapsed);
+    ramp_targets(rig, gains, ramp, s, now, reference_now, reference_next)
+}
+
+/// The base `elapsed` seconds after it stopped (`[env.gait.stop]`): [`start_targets`] run
+/// backward — at progress `s` the walk's share is `1 − s`, so over `ramp.seconds` the reference's
+/// angles and the velocity its feedback asks for shrink to 0 (shorter steps against the
+/// character's momentum, a braking walk) while the lean grows to the pose it then holds. A ramp of
+/// 0 seconds: the neutral standing pose at once (zero joint angles), as before stops had ramps.
+pub fn stop_targets(
+    rig: &Rig,
+    gains: &BalanceGains,
+    ramp: &StartRamp,
+    elapsed: f32,
+    now: &[BodyState],
+    reference_now: &[BodyState],
+    reference_next: &[f32],
+) -> Vec<f32> {
+    if !(ramp.seconds > 0.0 && ramp.seconds.is_finite()) {
+        return vec![0.0; reference_next.len()];
+    }
+    let s = 1.0 - ramp.progress(elapsed);
+    ramp_targets(rig, gains, ramp, s, now, reference_now, reference_next)
+}
+
+/// The ramp's targets at progress `s` in [0, 1] (1: [`base_targets`]): see [`start_targets`].
+fn ramp_targets(
+    rig: &Rig,
+    gains: &BalanceGains,
+    ramp: &StartRamp,
+    s: f32,
+    now: &[BodyState],
+    reference_now: &[BodyState],
+    reference_next: &[f32],
+) -> Vec<f32> {
     let base = braking_targets(rig, gains, now, reference_now, reference_next, s);
     if s >= 1.0 {
         return base;

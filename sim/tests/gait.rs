@@ -6,8 +6,8 @@ use lhm_scenes::{Benchmark, Support};
 use lhm_sim::env::{empty_room, without_furniture, EnvConfig, GaitConfig, TaskEnv};
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
-    aligned_to, base_targets, braking_targets, reference_for, start_targets, BalanceGains,
-    GaitReference, Rig, StartRamp,
+    aligned_to, base_targets, braking_targets, reference_for, start_targets, stop_targets,
+    BalanceGains, GaitReference, Rig, StartRamp,
 };
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
@@ -203,6 +203,57 @@ fn the_start_ramp_goes_from_the_lean_on_the_neutral_pose_to_the_walks_base() {
     );
 }
 
+#[test]
+fn the_stop_ramp_is_the_start_ramp_backward_and_no_ramp_is_the_neutral_pose_at_once() {
+    let model = CharacterModel::amp_humanoid();
+    let rig = Rig::new(&model).unwrap();
+    let reference = stride(&model);
+    let angles: Vec<f32> = (0..model.dofs.len()).map(|i| 0.01 * i as f32).collect();
+    let g = BalanceGains::default();
+    let ramp = StartRamp {
+        seconds: 1.0,
+        feedback: 0.25,
+        ankle_lean: 0.1,
+        hip_lean: -0.2,
+        abdomen_lean: 0.05,
+        knee_bend: 0.3,
+    };
+    // The moment it stops: the walk's base, exactly.
+    assert_eq!(
+        stop_targets(&rig, &g, &ramp, 0.0, &reference, &reference, &angles),
+        base_targets(&rig, &g, &reference, &reference, &angles)
+    );
+    // t seconds after the stop: the start ramp 1 − t seconds after its start.
+    for t in [0.25, 0.5, 1.0, 5.0] {
+        let back = (ramp.seconds - t).max(0.0);
+        assert_eq!(
+            stop_targets(&rig, &g, &ramp, t, &reference, &reference, &angles),
+            start_targets(&rig, &g, &ramp, back, &reference, &reference, &angles),
+            "{t} s after the stop"
+        );
+    }
+    // From its end on: the neutral pose with the whole lean, the feedback at its share against a
+    // velocity of 0 (every bit of the character's 0.8 m/s an error).
+    let end = stop_targets(&rig, &g, &ramp, 3.0, &reference, &reference, &angles);
+    let braking = braking_targets(&rig, &g, &reference, &reference, &angles, 0.0);
+    let knee = dof(&model, "left_knee");
+    let want = 0.25 * (braking[knee] - angles[knee]) + 0.3;
+    assert!((end[knee] - want).abs() < 1e-6, "{} vs {want}", end[knee]);
+    // No ramp: the neutral pose (zero joint angles) at once, as stops were before ramps.
+    assert_eq!(
+        stop_targets(
+            &rig,
+            &g,
+            &StartRamp::default(),
+            0.0,
+            &reference,
+            &reference,
+            &angles
+        ),
+        vec![0.0; model.dofs.len()]
+    );
+}
+
 /// 1.2 s at 30 fps: a stepping cycle (the feet take turns being lower) that moves forward.
 fn cycle_clip(model: &CharacterModel) -> Vec<KinematicPose> {
     let (rt, lt) = (
@@ -350,6 +401,55 @@ fn within_the_stop_distance_the_base_stands_and_the_phase_reads_zero() {
     assert_eq!(&env.observation()[dim - 2..], &[0.0, 0.0]);
     let after = joint_angles(&model, &env.world.body_states())[hip].abs();
     assert!(after < before - 0.1, "hip {before} -> {after}");
+}
+
+#[test]
+fn a_stop_ramp_fades_the_walk_out_from_the_moment_the_base_stops() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    // The joint angles 15 steps after a start in the gait, stopping at once (`stop_distance`
+    // 100 m) with `stop`, or walking on.
+    let after = |stop: Option<StartRamp>| {
+        let gait = GaitConfig {
+            stop_distance: if stop.is_some() { 100.0 } else { 0.0 },
+            stop: stop.unwrap_or_default(),
+            ..GaitConfig::default()
+        };
+        let mut env = gait_env(&model, Some(gait));
+        let yaw = env.yaw_toward_first_object();
+        env.start_in_gait(&demo, reference.clone(), 9, yaw);
+        for _ in 0..15 {
+            env.step(&vec![0.0; model.dofs.len()]);
+        }
+        assert_eq!(
+            env.gait_phase().is_none(),
+            stop.is_some(),
+            "stopped or walking"
+        );
+        joint_angles(&model, &env.world.body_states())
+    };
+    let apart = |a: &[f32], b: &[f32]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max)
+    };
+    // Without a ramp the joints are pulled to the neutral pose at once; over a 10-s ramp they
+    // stay near the walk (its share 0.95 after 15 steps). (The largest difference of any joint,
+    // radians.)
+    let walking = after(None);
+    let neutral = after(Some(StartRamp::default()));
+    let ramped = after(Some(StartRamp {
+        seconds: 10.0,
+        feedback: 1.0,
+        ..StartRamp::default()
+    }));
+    let (ramped, neutral) = (apart(&ramped, &walking), apart(&neutral, &walking));
+    assert!(
+        neutral > 0.2 && ramped < 0.5 * neutral,
+        "from the walk: ramped {ramped}, neutral {neutral}"
+    );
 }
 
 #[test]

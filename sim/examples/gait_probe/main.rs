@@ -31,7 +31,10 @@
 //! reference's footfall), the pose held with ankle and hip strategies; `SEARCH=stand` (or
 //! `both`) searches the stop's gains instead of (or with) the walk's. `STAND_START=1`: the
 //! rollouts start from the task's standing start (at rest) instead of the clip's state, the gait
-//! ramping in (`StartRamp`); `SEARCH=start` searches the ramp (`seconds,feedback,ankle_lean,…`).
+//! ramping in (`StartRamp`); `SEARCH=start` searches the ramp (`seconds,feedback,ankle_lean,…`),
+//! `RAMP=seconds,feedback,…` fixes it otherwise. With `ROOMS=1`, `STOP_DISTANCE=m` stops the
+//! gait that close to the object (`[env.gait] stop_distance`), `NEAR=m` starts that far before it
+//! (`start_distance`), and `SEARCH=stop` searches the stop's ramp (`[env.gait.stop]`).
 //! `gait_probe push`: the neutral standing pose (zero action) with every body moving at
 //! 0.1-1.0 m/s forward or sideways — how much momentum standing alone absorbs.
 
@@ -92,6 +95,10 @@ struct Setup {
     stand_start: bool,
     /// `HORIZON`: control steps per rollout (default `STEPS`).
     horizon: usize,
+    /// With `ROOMS=1`: `STOP_DISTANCE` (m; 0: no stop), the environment's `[env.gait]
+    /// stop_distance`, and `NEAR` (m; 0: the task's start), its `start_distance`.
+    stop_distance: f32,
+    near: f32,
     shared_reference: std::sync::Arc<GaitReference>,
 }
 
@@ -102,6 +109,8 @@ enum Search {
     Both,
     /// The start from rest's ramp (`StartRamp`; with `STAND_START=1`).
     Start,
+    /// The stop's ramp (`[env.gait.stop]`, `stop_targets`; with `ROOMS=1`).
+    Stop,
 }
 
 #[derive(Clone, Copy)]
@@ -109,6 +118,7 @@ struct Gains {
     walk: BalanceGains,
     stand: StandGains,
     start: StartRamp,
+    stop: StartRamp,
 }
 
 impl Setup {
@@ -117,7 +127,7 @@ impl Setup {
             Search::Walk => BalanceGains::LEN,
             Search::Stand => StandGains::LEN,
             Search::Both => BalanceGains::LEN + StandGains::LEN,
-            Search::Start => StartRamp::LEN,
+            Search::Start | Search::Stop => StartRamp::LEN,
         }
     }
 
@@ -133,6 +143,7 @@ impl Setup {
                 g.stand = stand(&v[BalanceGains::LEN..]);
             }
             Search::Start => g.start = StartRamp::from_array(std::array::from_fn(|i| v[i])),
+            Search::Stop => g.stop = StartRamp::from_array(std::array::from_fn(|i| v[i])),
         }
         g
     }
@@ -143,6 +154,7 @@ impl Setup {
             Search::Stand => g.stand.to_array().to_vec(),
             Search::Both => [&g.walk.to_array()[..], &g.stand.to_array()[..]].concat(),
             Search::Start => g.start.to_array().to_vec(),
+            Search::Stop => g.stop.to_array().to_vec(),
         }
     }
 }
@@ -168,6 +180,7 @@ fn rollout_traced(
         walk: gains,
         stand,
         start: ramp,
+        ..
     } = s.gains(g);
     let stop_at = s.stop_after.map(|n| n + 7 * phase_index);
     let mut hold: Option<StandHold> = None;
@@ -316,6 +329,9 @@ fn rollout_room(s: &Setup, g: &[f32], i: usize, steps: usize) -> (usize, f32) {
     config.gait = Some(GaitConfig {
         gains: gains.walk,
         start: gains.start,
+        stop: gains.stop,
+        stop_distance: s.stop_distance,
+        start_distance: s.near,
         ..GaitConfig::default()
     });
     let mut env = TaskEnv::new(&s.model, &task, &s.bench.catalogue, s.sim.clone(), config);
@@ -481,6 +497,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .unwrap_or(d)
     };
     let shared_reference = std::sync::Arc::new(reference.clone());
+    // A comma list of StartRamp::LEN numbers from the environment (missing entries 0).
+    let floats = |k: &str| -> Result<[f32; StartRamp::LEN], std::num::ParseFloatError> {
+        let mut a = [0f32; StartRamp::LEN];
+        let text = std::env::var(k).unwrap_or_default();
+        for (x, t) in a.iter_mut().zip(text.split(',').filter(|t| !t.is_empty())) {
+            *x = t.parse()?;
+        }
+        Ok(a)
+    };
     let setup = Setup {
         rig: Rig::new(&model).ok_or("not the AMP humanoid")?,
         model,
@@ -503,12 +528,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Ok("stand") => Search::Stand,
             Ok("both") => Search::Both,
             Ok("start") => Search::Start,
+            Ok("stop") => Search::Stop,
             _ => Search::Walk,
         },
         fixed: Gains {
             walk: BalanceGains::default(),
             stand: StandGains::default(),
-            start: StartRamp::default(),
+            // `RAMP=seconds,feedback,…`: the start ramp when it is not searched.
+            start: StartRamp::from_array(floats("RAMP")?),
+            stop: StartRamp::default(),
         },
         empty: std::env::var_os("EMPTY").is_some(),
         stop_on_footfall: std::env::var("STOP_ON").as_deref() == Ok("footfall"),
@@ -521,6 +549,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         rooms: std::env::var_os("ROOMS").is_some(),
         stand_start: std::env::var_os("STAND_START").is_some(),
         horizon: env_f32("HORIZON", STEPS as f32).max(1.0) as usize,
+        stop_distance: env_f32("STOP_DISTANCE", 0.0),
+        near: env_f32("NEAR", 0.0),
         shared_reference,
     };
     if push_mode {
@@ -656,7 +686,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Search::Walk => BalanceGains::NAMES.to_vec(),
         Search::Stand => StandGains::NAMES.to_vec(),
         Search::Both => [&BalanceGains::NAMES[..], &StandGains::NAMES[..]].concat(),
-        Search::Start => StartRamp::NAMES.to_vec(),
+        Search::Start | Search::Stop => StartRamp::NAMES.to_vec(),
     };
     for (n, g) in names.iter().zip(&best.1) {
         println!("  {n} = {g:.3}");
