@@ -176,6 +176,13 @@ pub enum EvalPolicy<'a> {
         first: &'a ActorCritic,
         later: &'a ActorCritic,
     },
+    /// In a `[env.gait]` run: `walk` until the gait's base stops at `stop_distance`, `stop`
+    /// from then on (two policies trained apart, joined where the environment switches the base
+    /// from the walk to the stand: what one policy learning both would at best do).
+    Joined {
+        walk: &'a ActorCritic,
+        stop: &'a ActorCritic,
+    },
 }
 
 impl<'a> EvalPolicy<'a> {
@@ -184,6 +191,15 @@ impl<'a> EvalPolicy<'a> {
         match *self {
             EvalPolicy::One(ac) => vec![ac],
             EvalPolicy::Teachers { first, later } => vec![first, later],
+            EvalPolicy::Joined { walk, stop } => vec![walk, stop],
+        }
+    }
+
+    /// Which of [`Self::policies`] acts in `env` now.
+    pub fn index_for(&self, env: &TaskEnv) -> usize {
+        match self {
+            EvalPolicy::Joined { .. } => usize::from(gait_stopped(env)),
+            _ => self.index_for_cycle(env.cycles.current),
         }
     }
 
@@ -192,8 +208,14 @@ impl<'a> EvalPolicy<'a> {
         match self {
             EvalPolicy::One(_) => 0,
             EvalPolicy::Teachers { .. } => usize::from(cycle > 0),
+            EvalPolicy::Joined { .. } => 0,
         }
     }
+}
+
+/// Whether `env` runs a gait whose base has stopped (it runs and no longer has a phase).
+pub fn gait_stopped(env: &TaskEnv) -> bool {
+    env.gait_running() && env.gait_phase().is_none()
 }
 
 impl<'a> From<&'a ActorCritic> for EvalPolicy<'a> {
@@ -222,7 +244,7 @@ pub fn evaluate<'a>(
         .find(|p| p.act_dim() != act_dim || p.obs_dim() != obs_dim)
     {
         return Err(NetError::Config(format!(
-            "the teachers' shapes differ: {obs_dim} observations -> {act_dim} actions and {} -> {}",
+            "the policies' shapes differ (teachers, or walk and stop): {obs_dim} observations -> {act_dim} actions and {} -> {}",
             other.obs_dim(),
             other.act_dim()
         )));
@@ -260,7 +282,7 @@ pub fn evaluate<'a>(
                 let acting: Vec<usize> = active
                     .iter()
                     .copied()
-                    .filter(|&i| policy.index_for_cycle(slots[i].env.cycles.current) == p)
+                    .filter(|&i| policy.index_for(&slots[i].env) == p)
                     .collect();
                 if acting.is_empty() {
                     continue;
@@ -626,6 +648,97 @@ mod tests {
             assert!(e.steps <= 2 * 8 + 1 || e.fell, "{e:?}");
         }
         assert_eq!(run(), first, "deterministic");
+    }
+
+    #[test]
+    fn a_joined_walk_and_stop_switches_policies_where_the_gait_stops() {
+        use lhm_sim::env::GaitConfig;
+        use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+        use lhm_sim::motion::retarget::KinematicPose;
+        use rapier3d::math::{Rotation, Vector};
+        let bench = lhm_scenes::Benchmark::embedded().unwrap();
+        let model = CharacterModel::amp_humanoid();
+        let sim = SimConfig::default();
+        // A synthetic stepping cycle: the thighs swing in opposition while the root moves on.
+        let (rt, lt) = (
+            model.body_index("right_thigh").unwrap(),
+            model.body_index("left_thigh").unwrap(),
+        );
+        let clip: Vec<KinematicPose> = (0..37)
+            .map(|i| {
+                let s = (std::f32::consts::TAU * i as f32 / 36.0).sin();
+                let mut local_rots = vec![Rotation::IDENTITY; model.bodies.len()];
+                local_rots[rt] = Rotation::from_rotation_y(-0.3 * s);
+                local_rots[lt] = Rotation::from_rotation_y(0.3 * s);
+                KinematicPose {
+                    root_pos: Vector::new(i as f32 / 30.0, 0.0, 0.9),
+                    root_rot: Rotation::IDENTITY,
+                    local_rots,
+                }
+            })
+            .collect();
+        let demo = DemoMotion::from_clips(
+            &model,
+            vec![("cycle_walk".into(), clip, 1.0 / 30.0)],
+            AmpWindow::of(&EnvConfig::default(), &sim),
+        )
+        .unwrap();
+        let reference = std::sync::Arc::new(
+            lhm_sim::gait::GaitReference::new(&model, &demo, 0, 1.0 / sim.control_hz).unwrap(),
+        );
+        let config = |stop_distance| EnvConfig {
+            gait: Some(GaitConfig {
+                stop_distance,
+                ..GaitConfig::default()
+            }),
+            ..EnvConfig::default()
+        };
+        let (never, at_once) = (config(0.0), config(100.0));
+        let net = |seed| {
+            let mut c = lhm_nets::ActorCriticConfig::with_hidden(&[16]);
+            c.init_seed = seed;
+            ActorCritic::new(TaskEnv::obs_dim(&model, &never), model.dofs.len(), &c).unwrap()
+        };
+        let (a, b) = (net(1), net(2));
+        let jobs: Vec<(Task, u64)> = bench.tasks(lhm_scenes::Split::Unseen)[..3]
+            .iter()
+            .filter_map(|t| t.single_pair(0).map(|t| (t, 0)))
+            .collect();
+        let setup = |env| EvalSetup {
+            gait: Some(GaitStart {
+                demo: &demo,
+                reference: reference.clone(),
+                rest: false,
+            }),
+            max_steps: Some(20),
+            ..plain_setup(&model, &bench, &sim, env, 2)
+        };
+        let run = |p: EvalPolicy, env| evaluate(p, &setup(env), &jobs, &|_| {}).unwrap();
+        let joined = EvalPolicy::Joined { walk: &a, stop: &b };
+        // A base that never stops: the walking policy throughout.
+        assert_eq!(run(joined, &never), run(EvalPolicy::One(&a), &never));
+        // One that stops at once: the stopping policy from the first step after the stop on.
+        let mut env = setup(&at_once).env_for(&jobs[0].0, 0);
+        assert!(!gait_stopped(&env), "walking until its first step");
+        assert_eq!(joined.index_for(&env), 0);
+        env.step(&vec![0.0; model.dofs.len()]);
+        assert!(gait_stopped(&env));
+        assert_eq!(joined.index_for(&env), 1);
+        // The same net on both sides scores exactly as that net alone.
+        let same = EvalPolicy::Joined { walk: &b, stop: &b };
+        assert_eq!(run(same, &at_once), run(EvalPolicy::One(&b), &at_once));
+        // A stopping policy of another shape is refused.
+        let small = ActorCritic::new(
+            7,
+            model.dofs.len(),
+            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
+        )
+        .unwrap();
+        let odd = EvalPolicy::Joined {
+            walk: &a,
+            stop: &small,
+        };
+        assert!(evaluate(odd, &setup(&at_once), &jobs, &|_| {}).is_err());
     }
 
     #[test]

@@ -35,6 +35,12 @@ pub struct EvalArgs {
     /// --policy (Teacher 2) on every later one, switched at the cycle handoff with no reset.
     #[arg(long, conflicts_with = "first_pair")]
     pub(crate) teacher1: Option<PathBuf>,
+    /// In a run with `[env.gait]`: this checkpoint acts once the gait's base has stopped at
+    /// `stop_distance`, --policy until then (a walking and a stopping policy trained apart,
+    /// joined where the base switches from the walk to the stand). Each reads its own
+    /// `config.toml`'s network; the environment is --policy's (or --config).
+    #[arg(long, conflicts_with = "teacher1")]
+    pub(crate) stop_policy: Option<PathBuf>,
     /// Only the first N tasks of the split (a quick look).
     #[arg(long)]
     pub(crate) limit: Option<usize>,
@@ -102,6 +108,8 @@ pub(crate) fn table_is_current(
         && tasks.is_none_or(|n| field("tasks") == Some(n as u64))
         && field("policy_iteration") == policy_iteration(policy)
         && field("teacher1_iteration") == teacher1.and_then(policy_iteration)
+        // A joined walk-and-stop evaluation (--stop-policy) is not this policy's table.
+        && table.get("stop_policy").is_none_or(|v| v.is_null())
 }
 
 /// A policy whose mean action is exactly 0 in every state (its output layer's weights and bias
@@ -172,12 +180,29 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
         None => None,
     };
-    let policy = match &teacher1 {
-        Some(t1) => EvalPolicy::Teachers {
+    let stopper = match &a.stop_policy {
+        Some(path) => {
+            if train.env.gait.is_none() {
+                bail!(
+                    "--stop-policy {}: the run has no [env.gait], so its base never stops",
+                    path.display()
+                );
+            }
+            let config = crate::render_cmd::train_config_for(Some(path), None)?;
+            Some(crate::render_cmd::load_policy(path, &config, &model)?)
+        }
+        None => None,
+    };
+    let policy = match (&teacher1, &stopper) {
+        (Some(t1), _) => EvalPolicy::Teachers {
             first: &t1.actor_critic,
             later: &actor_critic,
         },
-        None => EvalPolicy::One(&actor_critic),
+        (None, Some(stop)) => EvalPolicy::Joined {
+            walk: &actor_critic,
+            stop: &stop.actor_critic,
+        },
+        (None, None) => EvalPolicy::One(&actor_critic),
     };
     let mut tasks = split_tasks(&bench, &a.split)?;
     if a.first_pair {
@@ -255,9 +280,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let wall = started.elapsed().as_secs_f64();
     let table = summarize(&episodes);
     let steps: u64 = episodes.iter().map(|e| u64::from(e.steps)).sum();
-    let method = match &a.teacher1 {
-        Some(t1) => format!("{} then {} (T)", t1.display(), a.policy.display()),
-        None => format!(
+    let method = match (&a.teacher1, &a.stop_policy) {
+        (Some(t1), _) => format!("{} then {} (T)", t1.display(), a.policy.display()),
+        (None, Some(stop)) => format!("{} walking, {} stopped", a.policy.display(), stop.display()),
+        (None, None) => format!(
             "{}{}",
             a.policy.display(),
             if a.first_pair { " (first pair)" } else { "" }
@@ -278,6 +304,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         "policy": a.policy.display().to_string(),
         "policy_iteration": policy_iteration(&a.policy),
         "teacher1_iteration": a.teacher1.as_deref().and_then(policy_iteration),
+        "stop_policy": a.stop_policy.as_ref().map(|p| p.display().to_string()),
     });
     if let Some(map) = json.as_object_mut() {
         for (k, v) in table.flat() {
@@ -309,9 +336,13 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 &mut env,
                 &shot,
                 &mut |env| {
-                    // The same switch as the evaluation: Teacher 1 on the first cycle.
-                    let ac = match &teacher1 {
-                        Some(t1) if env.cycles.current == 0 => &t1.actor_critic,
+                    // The same switch as the evaluation: Teacher 1 on the first cycle, the
+                    // stopping policy once the base has stopped.
+                    let ac = match (&teacher1, &stopper) {
+                        (Some(t1), _) if env.cycles.current == 0 => &t1.actor_critic,
+                        (None, Some(stop)) if lhm_actor::eval::gait_stopped(env) => {
+                            &stop.actor_critic
+                        }
                         _ => &actor_critic,
                     };
                     Ok(

@@ -589,6 +589,7 @@ fn evaluate(
                 seeds: config.eval.seeds,
                 first_pair: row.first_pair,
                 teacher1: row.teacher1.map(Path::to_path_buf),
+                stop_policy: None,
                 limit: config.eval.limit,
                 config: None,
                 json: false,

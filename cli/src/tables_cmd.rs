@@ -286,6 +286,7 @@ fn evaluation(
         seeds: args.seeds,
         first_pair: false,
         teacher1: row.teacher1.clone(),
+        stop_policy: None,
         limit: args.limit,
         config: None,
         json: false,
