@@ -654,32 +654,16 @@ mod tests {
     fn a_joined_walk_and_stop_switches_policies_where_the_gait_stops() {
         use lhm_sim::env::GaitConfig;
         use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
-        use lhm_sim::motion::retarget::KinematicPose;
-        use rapier3d::math::{Rotation, Vector};
         let bench = lhm_scenes::Benchmark::embedded().unwrap();
         let model = CharacterModel::amp_humanoid();
         let sim = SimConfig::default();
-        // A synthetic stepping cycle: the thighs swing in opposition while the root moves on.
-        let (rt, lt) = (
-            model.body_index("right_thigh").unwrap(),
-            model.body_index("left_thigh").unwrap(),
-        );
-        let clip: Vec<KinematicPose> = (0..37)
-            .map(|i| {
-                let s = (std::f32::consts::TAU * i as f32 / 36.0).sin();
-                let mut local_rots = vec![Rotation::IDENTITY; model.bodies.len()];
-                local_rots[rt] = Rotation::from_rotation_y(-0.3 * s);
-                local_rots[lt] = Rotation::from_rotation_y(0.3 * s);
-                KinematicPose {
-                    root_pos: Vector::new(i as f32 / 30.0, 0.0, 0.9),
-                    root_rot: Rotation::IDENTITY,
-                    local_rots,
-                }
-            })
-            .collect();
         let demo = DemoMotion::from_clips(
             &model,
-            vec![("cycle_walk".into(), clip, 1.0 / 30.0)],
+            vec![(
+                "cycle_walk".into(),
+                lhm_sim::gait::synthetic_cycle_clip(&model).unwrap(),
+                1.0 / 30.0,
+            )],
             AmpWindow::of(&EnvConfig::default(), &sim),
         )
         .unwrap();

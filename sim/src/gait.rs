@@ -15,6 +15,7 @@
 use crate::fidelity::joint_angles;
 use crate::mjcf::CharacterModel;
 use crate::motion::demo::DemoMotion;
+use crate::motion::retarget::KinematicPose;
 use crate::obs::{heading_yaw, BodyState, HeadingFrame};
 use rapier3d::math::{Rotation, Vector};
 use serde::{Deserialize, Serialize};
@@ -581,4 +582,30 @@ pub fn reference_for(
         .ok_or_else(|| format!("[env.gait] clip {clip:?}: no installed clip has that name"))?;
     GaitReference::new(model, demo, index, dt)
         .ok_or_else(|| format!("[env.gait] clip {clip:?}: shorter than two control steps"))
+}
+
+/// A synthetic stepping cycle, a fixture for tests and probes that need a gait without installed
+/// clips: 37 frames at 30 Hz (1.2 s, the last frame the first's pose one cycle on), the thighs
+/// swinging ±0.3 rad in opposition while the root moves forward at 1 m/s, 0.9 m up. `None` for
+/// a character without `right_thigh` and `left_thigh`.
+pub fn synthetic_cycle_clip(model: &CharacterModel) -> Option<Vec<KinematicPose>> {
+    let (rt, lt) = (
+        model.body_index("right_thigh")?,
+        model.body_index("left_thigh")?,
+    );
+    Some(
+        (0..37)
+            .map(|i| {
+                let s = (std::f32::consts::TAU * i as f32 / 36.0).sin();
+                let mut local_rots = vec![Rotation::IDENTITY; model.bodies.len()];
+                local_rots[rt] = Rotation::from_rotation_y(-0.3 * s);
+                local_rots[lt] = Rotation::from_rotation_y(0.3 * s);
+                KinematicPose {
+                    root_pos: Vector::new(i as f32 / 30.0, 0.0, 0.9),
+                    root_rot: Rotation::IDENTITY,
+                    local_rots,
+                }
+            })
+            .collect(),
+    )
 }

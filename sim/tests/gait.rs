@@ -7,7 +7,7 @@ use lhm_sim::env::{empty_room, without_furniture, EnvConfig, GaitConfig, TaskEnv
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
     aligned_to, base_targets, braking_targets, reference_for, start_targets, stop_targets,
-    BalanceGains, GaitReference, Rig, StartRamp,
+    synthetic_cycle_clip, BalanceGains, GaitReference, Rig, StartRamp,
 };
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
@@ -255,30 +255,14 @@ fn the_stop_ramp_is_the_start_ramp_backward_and_no_ramp_is_the_neutral_pose_at_o
 }
 
 /// 1.2 s at 30 fps: a stepping cycle (the feet take turns being lower) that moves forward.
-fn cycle_clip(model: &CharacterModel) -> Vec<KinematicPose> {
-    let (rt, lt) = (
-        model.body_index("right_thigh").unwrap(),
-        model.body_index("left_thigh").unwrap(),
-    );
-    (0..37)
-        .map(|i| {
-            let s = (std::f32::consts::TAU * i as f32 / 36.0).sin();
-            let mut local_rots = vec![Rotation::IDENTITY; model.bodies.len()];
-            local_rots[rt] = Rotation::from_rotation_y(-0.3 * s);
-            local_rots[lt] = Rotation::from_rotation_y(0.3 * s);
-            KinematicPose {
-                root_pos: Vector::new(i as f32 / 30.0, 0.0, 0.9),
-                root_rot: Rotation::IDENTITY,
-                local_rots,
-            }
-        })
-        .collect()
-}
-
 fn cycle_demo(model: &CharacterModel) -> DemoMotion {
     DemoMotion::from_clips(
         model,
-        vec![("cycle_walk".into(), cycle_clip(model), 1.0 / 30.0)],
+        vec![(
+            "cycle_walk".into(),
+            synthetic_cycle_clip(model).unwrap(),
+            1.0 / 30.0,
+        )],
         AmpWindow::of(&EnvConfig::default(), &SimConfig::default()),
     )
     .unwrap()
@@ -575,13 +559,13 @@ fn the_start_ramp_acts_after_a_rest_start_and_not_after_a_walking_one() {
     assert_eq!(after_a_step(&ramped, false), after_a_step(&plain, false));
 }
 
-/// `cycle_clip` with the swinging leg's knee bent, so the feet take turns being lower.
+/// `synthetic_cycle_clip` with the swinging leg's knee bent, so the feet take turns being lower.
 fn stepping_demo(model: &CharacterModel) -> DemoMotion {
     let (rs, ls) = (
         model.body_index("right_shin").unwrap(),
         model.body_index("left_shin").unwrap(),
     );
-    let mut clip = cycle_clip(model);
+    let mut clip = synthetic_cycle_clip(model).unwrap();
     for (i, pose) in clip.iter_mut().enumerate() {
         let s = (std::f32::consts::TAU * i as f32 / 36.0).sin();
         pose.local_rots[rs] = Rotation::from_rotation_y(0.6 * s.max(0.0));
