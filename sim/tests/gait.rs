@@ -254,7 +254,7 @@ fn the_stop_ramp_is_the_start_ramp_backward_and_no_ramp_is_the_neutral_pose_at_o
     );
 }
 
-/// 1.2 s at 30 fps: a stepping cycle (the feet take turns being lower) that moves forward.
+/// `synthetic_cycle_clip` (1.2 s at 30 fps, thighs swinging, root moving forward) as a one-clip demo.
 fn cycle_demo(model: &CharacterModel) -> DemoMotion {
     DemoMotion::from_clips(
         model,
