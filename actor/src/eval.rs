@@ -151,7 +151,7 @@ impl EvalSetup<'_> {
         };
         let mut env = TaskEnv::new(self.model, &task, self.catalogue, self.sim.clone(), config);
         if let Some(g) = &self.gait {
-            let yaw = env.yaw_toward_first_object();
+            let yaw = env.yaw_toward_way();
             let step = gait_start_step(&task.id, seed, g.reference.len());
             env.start_in_gait_from(
                 g.demo,

@@ -476,7 +476,7 @@ impl Rollout {
             let rng = &mut self.rng;
             let step = rng.below(gait.len());
             let noise = (2.0 * rng.next_f64() as f32 - 1.0) * self.spec.env.demo_start_yaw_noise;
-            let yaw = env.yaw_toward_first_object() + noise;
+            let yaw = env.yaw_toward_way() + noise;
             // At rest ([env.gait] rest_start_fraction), else near the object or at the task's
             // start (near_start_fraction); no draw unless the run mixes them, so other runs keep
             // their random streams.
@@ -497,6 +497,16 @@ impl Rollout {
                 Some(g) => g.start_distance > 0.0,
                 None => false,
             };
+            if let Some(g) = self.spec.env.gait.as_ref().filter(|_| near) {
+                // Anywhere on the way (start_distance_max): drawn only when the way is longer
+                // than start_distance, so runs without it keep their random streams.
+                let hi = g.start_distance_max.min(env.way_length());
+                if hi > g.start_distance {
+                    let d = g.start_distance + (hi - g.start_distance) * rng.next_f64() as f32;
+                    env.start_in_gait_on_way(demo, Arc::clone(gait), step, noise, d);
+                    return env;
+                }
+            }
             env.start_in_gait_where(demo, Arc::clone(gait), step, yaw, near);
         } else if let Some(demo) = &self.demo {
             let rng = &mut self.rng;

@@ -195,7 +195,7 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         let reference =
             lhm_sim::gait::reference_for(&model, &demo, &gait.clip, 1.0 / train.sim.control_hz)
                 .map_err(anyhow::Error::msg)?;
-        let yaw = env.yaw_toward_first_object();
+        let yaw = env.yaw_toward_way();
         let step = a.eval_seed.map_or(0, |seed| {
             lhm_actor::eval::gait_start_step(&task.id, seed, reference.len())
         });

@@ -217,6 +217,39 @@ impl ClearanceField {
     }
 }
 
+impl ClearanceField {
+    /// Whether every point of the segment `a`-`b` (sampled every half cell) has `clear` metres.
+    fn clear_between(&self, a: [f64; 2], b: [f64; 2], clear: f64) -> bool {
+        let n = (dist(a, b) / (self.cell / 2.0)).ceil().max(1.0) as usize;
+        (0..=n).all(|k| {
+            let t = k as f64 / n as f64;
+            let p = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+            self.cell_of(p)
+                .is_some_and(|(i, j)| f64::from(self.dist[j * self.nx + i]) >= clear)
+        })
+    }
+
+    /// `path` pulled straight: from each kept waypoint, on to the farthest later one in sight
+    /// with `clear` metres all the way — the grid's 45° zig-zags become the straight lines a
+    /// walker takes.
+    fn straighten(&self, path: &[[f64; 2]], clear: f64) -> Vec<[f64; 2]> {
+        let Some(&first) = path.first() else {
+            return Vec::new();
+        };
+        let mut out = vec![first];
+        let mut i = 0;
+        while i + 1 < path.len() {
+            let mut j = path.len() - 1;
+            while j > i + 1 && !self.clear_between(path[i], path[j], clear) {
+                j -= 1;
+            }
+            out.push(path[j]);
+            i = j;
+        }
+        out
+    }
+}
+
 /// Drops collinear grid waypoints so paths are short to store and draw.
 fn simplify(path: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     let mut out: Vec<[f64; 2]> = Vec::with_capacity(path.len());
@@ -260,6 +293,41 @@ pub fn obstacle_rect(o: &crate::model::Obstacle) -> Rect {
 
 pub fn footprint(pos: [f64; 3], yaw: f64, size: [f64; 3]) -> Rect {
     Rect::new([pos[0], pos[1]], [size[0], size[1]], yaw)
+}
+
+/// The walk leg of `task`'s first step alone ([`plan_task`]'s first leg without planning the
+/// rest, whose carry legs a larger walking clearance may close): from the start to a pick-up
+/// spot of the first object, every object on the floor blocking the way, pulled straight
+/// (waypoints only where the way must turn, with the clearance kept between them).
+pub fn plan_first_walk(task: &Task, c: &Clearance) -> Result<Vec<[f64; 2]>, RouteError> {
+    let err = |object: &str, reason: String| RouteError {
+        step: 0,
+        object: object.into(),
+        kind: LegKind::Walk,
+        reason,
+    };
+    let Some(step) = task.sequence.first() else {
+        return Err(err("", "the task has no steps".into()));
+    };
+    let Some(obj) = task.object_index(&step.object).map(|i| &task.objects[i]) else {
+        return Err(err(&step.object, "unknown object".into()));
+    };
+    let mut field = ClearanceField::new(task.room_size, c.cell);
+    for o in &task.obstacles {
+        field.block(&obstacle_rect(o));
+    }
+    for o in task.objects.iter().filter(|o| o.on == Support::Floor) {
+        field.block(&footprint(o.pos, o.yaw, o.size));
+    }
+    let pick = footprint(obj.pos, obj.yaw, obj.size);
+    let path = field
+        .plan(
+            task.start.pos,
+            |_, d| d >= c.walk,
+            |p, d| d >= c.walk && pick.distance(p) <= c.reach,
+        )
+        .map_err(|r| err(&obj.id, r))?;
+    Ok(field.straighten(&path, c.walk))
 }
 
 /// Plans the walk and carry legs of every step of `task`, in order. Objects not being carried

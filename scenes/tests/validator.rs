@@ -1,6 +1,6 @@
 //! The validator and the route planner on hand-built and hand-broken tasks.
 
-use lhm_scenes::routes::{plan_task, Clearance, LegKind};
+use lhm_scenes::routes::{plan_first_walk, plan_task, Clearance, LegKind};
 use lhm_scenes::validate::validate_task;
 use lhm_scenes::{
     Benchmark, MovableObject, Obstacle, PlacementStep, RoomType, Split, StartPose, Support, Task,
@@ -73,6 +73,43 @@ fn routes_need_a_corridor_wide_enough_to_carry() {
     );
     // Closed barrier with the box on the far side: cannot even walk to it.
     let e = plan_task(&corridor(0.0, [1.5, 1.0]), &c).expect_err("closed");
+    assert_eq!(e.kind, LegKind::Walk);
+}
+
+#[test]
+fn the_first_walk_alone_is_plan_tasks_first_leg_and_needs_no_carry_route() {
+    let c = Clearance::default();
+    let task = corridor(0.6, [1.5, 1.0]);
+    let legs = plan_task(&task, &c).expect("walking through 0.6 m works");
+    let walk = plan_first_walk(&task, &c).expect("walk");
+    let grid = &legs[0].path;
+    let length = |p: &[[f64; 2]]| -> f64 {
+        p.windows(2)
+            .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+            .sum()
+    };
+    // The same ends, pulled straight: no longer, and through the opening (|y| < 0.3 at x = 0).
+    assert_eq!(walk.first(), grid.first());
+    assert_eq!(walk.last(), grid.last());
+    assert!(length(&walk) <= length(grid) + 1e-9);
+    let crossing = walk
+        .windows(2)
+        .find(|w| w[0][0] <= 0.0 && w[1][0] >= 0.0)
+        .expect("crosses x = 0");
+    let t = -crossing[0][0] / (crossing[1][0] - crossing[0][0]);
+    let y = crossing[0][1] + t * (crossing[1][1] - crossing[0][1]);
+    assert!(y.abs() < 0.3 - c.walk + 0.05, "crosses at y = {y}");
+    // Too narrow to carry the box out, but the walk to it exists.
+    let task = corridor(0.6, [-1.5, 1.0]);
+    assert!(plan_task(&task, &c).is_err());
+    let walk = plan_first_walk(&task, &c).expect("the walk needs no carry route");
+    assert!(
+        walk.last().expect("end")[0] < 0.0,
+        "stays on the start's side"
+    );
+    // A clearance wider than the opening closes the walk through it.
+    let wide = Clearance { walk: 0.35, ..c };
+    let e = plan_first_walk(&corridor(0.6, [1.5, 1.0]), &wide).expect_err("0.7 m needed");
     assert_eq!(e.kind, LegKind::Walk);
 }
 

@@ -154,6 +154,21 @@ pub struct GaitConfig {
     /// practise the stop without forgetting the walk. `lhm eval` and `render-rollout` always start
     /// at `start_distance` when it is set.
     pub near_start_fraction: f32,
+    /// Above `start_distance`: a walking start near the object is drawn instead at a uniform
+    /// distance in [`start_distance`, the smaller of this and the task's start's distance to
+    /// the first object], on the straight way from the task's start to the object (so inside
+    /// the room), heading at the object as the other starts — the long walks a start at rest
+    /// must make, practised from every point of the way. 0 (or ≤ `start_distance`): every such
+    /// start `start_distance` before the object.
+    pub start_distance_max: f32,
+    /// Above 0: the base steers along a route planned around the room's other objects (and
+    /// furniture, where the room keeps it) to the first object ([`crate::route`]), at the point
+    /// this many metres ahead on it, instead of straight at the object; starts in the gait turn
+    /// toward that point and `start_distance_max`'s starts lie on the route. 0: straight.
+    pub route_lookahead: f32,
+    /// The clearance (m) the route keeps from walls, furniture and objects where it can (else
+    /// the benchmark validator's 0.25 m).
+    pub route_clearance: f32,
     /// The fraction of the actors' episodes that start at rest: the task's own standing start
     /// (still, in the neutral pose) turned toward the first object, the gait running from its
     /// cycle step as in the other starts — the walk must begin without the clip's momentum, as
@@ -183,6 +198,11 @@ impl Default for GaitConfig {
             stop_distance: 0.0,
             start_distance: 0.0,
             near_start_fraction: 1.0,
+            start_distance_max: 0.0,
+            route_lookahead: 0.0,
+            // A walking character's feet swing ~0.2 m either side of its root: 0.25 m (the
+            // validator's disc) brushes objects, 0.45 m passes them.
+            route_clearance: 0.45,
             rest_start_fraction: 0.0,
             gains: BalanceGains::default(),
             start: StartRamp::default(),
@@ -331,6 +351,8 @@ pub struct TaskEnv {
     /// them: no gait), and the gait this episode runs (after [`Self::start_gait`]).
     rig: Option<Rig>,
     gait: Option<GaitRun>,
+    /// With `[env.gait] route_lookahead`: the planned walk to the first object.
+    route: Option<Arc<Vec<[f32; 2]>>>,
 }
 
 /// Snapshot of a whole environment: world, cycle state, AMP history, counters.
@@ -372,6 +394,12 @@ impl TaskEnv {
             model.body_index("right_hand").unwrap_or(0),
         ];
         let rig = config.gait.as_ref().and_then(|_| Rig::new(model));
+        let route = config
+            .gait
+            .as_ref()
+            .filter(|g| g.route_lookahead > 0.0)
+            .and_then(|g| crate::route::first_walk(task, g.route_clearance))
+            .map(Arc::new);
         let mut amp = AmpHistory::new(config.amp_frames, amp_frame_dim(model));
         let prev_bodies = world.body_states();
         amp.push(amp_frame(model, &prev_bodies));
@@ -405,6 +433,7 @@ impl TaskEnv {
                 .collect(),
             rig,
             gait: None,
+            route,
         }
     }
 
@@ -429,6 +458,70 @@ impl TaskEnv {
             return self.task.start.yaw as f32;
         }
         dy.atan2(dx) as f32
+    }
+
+    /// The horizontal distance (m) from the task's start to the first pair's object; 0 without
+    /// one.
+    pub fn first_object_distance(&self) -> f32 {
+        self.first_object().map_or(0.0, |o| {
+            let dx = o.pos[0] - self.task.start.pos[0];
+            let dy = o.pos[1] - self.task.start.pos[1];
+            dx.hypot(dy) as f32
+        })
+    }
+
+    /// The length (m) of the way from the task's start to the first object: along the route
+    /// (then straight from its end) with one, else [`Self::first_object_distance`].
+    pub fn way_length(&self) -> f32 {
+        match (&self.route, self.first_object_xy()) {
+            (Some(route), Some(object)) => {
+                let along: f32 = route
+                    .windows(2)
+                    .map(|p| (p[1][0] - p[0][0]).hypot(p[1][1] - p[0][1]))
+                    .sum();
+                let last = route.last().copied().unwrap_or(object);
+                along + (object[0] - last[0]).hypot(object[1] - last[1])
+            }
+            _ => self.first_object_distance(),
+        }
+    }
+
+    /// The first object's (x, y) as the task places it.
+    fn first_object_xy(&self) -> Option<[f32; 2]> {
+        self.first_object()
+            .map(|o| [o.pos[0] as f32, o.pos[1] as f32])
+    }
+
+    /// Where the base aims from `at` on the way to the first object: the route's point
+    /// `route_lookahead` ahead ([`crate::route::lookahead`]) with a route, else the object.
+    fn way_point_from(&self, at: [f32; 2]) -> Option<[f32; 2]> {
+        let object = self.first_object_xy()?;
+        match (&self.route, self.config.gait.as_ref()) {
+            (Some(route), Some(g)) => Some(crate::route::lookahead(
+                route,
+                object,
+                at,
+                g.route_lookahead,
+            )),
+            _ => Some(object),
+        }
+    }
+
+    /// The yaw (radians) from the task's start toward where the base first aims: along the route
+    /// with `[env.gait] route_lookahead`, else [`Self::yaw_toward_first_object`].
+    pub fn yaw_toward_way(&self) -> f32 {
+        let start = [self.task.start.pos[0] as f32, self.task.start.pos[1] as f32];
+        match self.way_point_from(start).filter(|_| self.route.is_some()) {
+            Some(p) if (p[0] - start[0]).abs() + (p[1] - start[1]).abs() > 1e-6 => {
+                (p[1] - start[1]).atan2(p[0] - start[0])
+            }
+            _ => self.yaw_toward_first_object(),
+        }
+    }
+
+    /// The planned walk to the first object (`[env.gait] route_lookahead`), if any.
+    pub fn route(&self) -> Option<&[[f32; 2]]> {
+        self.route.as_deref().map(Vec::as_slice)
     }
 
     /// The first pair's object as the task places it.
@@ -549,6 +642,41 @@ impl TaskEnv {
                 o.pos[1] as f32 - config.start_distance * yaw.sin(),
             ];
         }
+        self.start_from_demo_at(demo, reference.clip, reference.time(step), at, yaw);
+        self.start_gait(reference, step)
+    }
+
+    /// [`Self::start_in_gait`] `distance` (m) before the first object along the way from the
+    /// task's start to it (`[env.gait] start_distance_max`): on the route with one, else on the
+    /// straight line; heading `yaw_offset` off the direction to where the base aims from there.
+    /// At the task's start when the way is no longer than `distance` (or there is no object).
+    pub fn start_in_gait_on_way(
+        &mut self,
+        demo: &DemoMotion,
+        reference: Arc<GaitReference>,
+        step: usize,
+        yaw_offset: f32,
+        distance: f32,
+    ) -> bool {
+        if self.config.gait.is_none() || self.rig.is_none() {
+            return false;
+        }
+        let start = [self.task.start.pos[0] as f32, self.task.start.pos[1] as f32];
+        let at = match (self.first_object_xy(), &self.route) {
+            (Some(object), Some(route)) => {
+                crate::route::point_before(route, object, distance).unwrap_or(start)
+            }
+            (Some(object), None) => {
+                crate::route::point_before(&[start], object, distance).unwrap_or(start)
+            }
+            (None, _) => start,
+        };
+        let aim = self.way_point_from(at).unwrap_or(at);
+        let yaw = if (aim[0] - at[0]).abs() + (aim[1] - at[1]).abs() > 1e-6 {
+            (aim[1] - at[1]).atan2(aim[0] - at[0])
+        } else {
+            self.yaw_toward_first_object()
+        } + yaw_offset;
         self.start_from_demo_at(demo, reference.clip, reference.time(step), at, yaw);
         self.start_gait(reference, step)
     }
@@ -776,13 +904,28 @@ impl TaskEnv {
     fn gait_targets(&mut self, action: &[f32]) -> Option<Vec<f32>> {
         let now = self.world.body_states();
         let last = self.task.sequence.len().saturating_sub(1);
+        let current = self.cycles.current.min(last);
         // The current object in the root's heading frame (after the last handoff, the last one).
         let object = self
-            .pair(self.cycles.current.min(last))
+            .pair(current)
             .zip(now.first())
             .map(|((i, _, _), root)| {
                 HeadingFrame::of(root).vector(self.object_state(i).pos - root.pos)
             });
+        // Where the base steers: along the route on the way to the first object, else the object.
+        let aim = match (&self.route, self.config.gait.as_ref(), self.pair(current)) {
+            (Some(route), Some(g), Some((i, _, _))) if current == 0 => now.first().map(|root| {
+                let o = self.object_state(i).pos;
+                let p = crate::route::lookahead(
+                    route,
+                    [o.x, o.y],
+                    [root.pos.x, root.pos.y],
+                    g.route_lookahead,
+                );
+                HeadingFrame::of(root).vector(Vector::new(p[0], p[1], root.pos.z) - root.pos)
+            }),
+            _ => object,
+        };
         let (run, rig, config) = (
             self.gait.as_mut()?,
             self.rig.as_ref()?,
@@ -817,7 +960,7 @@ impl TaskEnv {
             ),
             (false, false) => base_targets(rig, &config.gains, &now, reference_now, angles),
         };
-        if let (Some(to), false) = (object, run.stopped) {
+        if let (Some(to), false) = (aim, run.stopped) {
             let error = to.y.atan2(to.x);
             steer(
                 rig,

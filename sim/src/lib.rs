@@ -13,6 +13,7 @@ pub mod obs;
 pub mod plan;
 pub mod render;
 pub mod room;
+pub mod route;
 pub mod task;
 pub mod vla;
 pub mod world;

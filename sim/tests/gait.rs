@@ -484,6 +484,116 @@ fn a_start_distance_starts_the_gait_that_far_before_the_first_object_heading_at_
 }
 
 #[test]
+fn a_start_on_the_way_is_that_far_before_the_object_on_the_line_from_the_tasks_start() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let gait = GaitConfig {
+        start_distance: 0.5,
+        start_distance_max: 10.0,
+        ..GaitConfig::default()
+    };
+    let mut env = gait_env(&model, Some(gait.clone()));
+    let first = &env.task.sequence[0].object;
+    let o = env.task.objects.iter().find(|o| &o.id == first).unwrap();
+    let object = Vector::new(o.pos[0] as f32, o.pos[1] as f32, 0.0);
+    let task_start = Vector::new(
+        env.task.start.pos[0] as f32,
+        env.task.start.pos[1] as f32,
+        0.0,
+    );
+    let way = (object - task_start).length();
+    assert!((env.first_object_distance() - way).abs() < 1e-4);
+    assert!(way > 0.8, "the fixture's object is {way} m away");
+    assert!(
+        (env.way_length() - way).abs() < 1e-4,
+        "no route: the straight way"
+    );
+    let d = 0.6 * way;
+    // Heading 0.4 rad off the object: the position stays on the way.
+    let yaw = env.yaw_toward_first_object() + 0.4;
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    assert!(env.start_in_gait_on_way(&demo, reference, 0, 0.4, d));
+    assert!(env.gait_running());
+    let root = env.world.body_states()[0];
+    let at = Vector::new(root.pos.x, root.pos.y, 0.0);
+    assert!(((object - at).length() - d).abs() < 0.02);
+    assert!(((at - task_start).length() - (way - d)).abs() < 0.02);
+    let forward = root.rot * Vector::X;
+    assert!((forward.y.atan2(forward.x) - yaw).abs() < 0.02);
+    // Further than the way: the task's start.
+    let mut env = gait_env(&model, Some(gait));
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    assert!(env.start_in_gait_on_way(&demo, reference, 0, 0.4, way + 1.0));
+    let root = env.world.body_states()[0];
+    let off = Vector::new(root.pos.x - task_start.x, root.pos.y - task_start.y, 0.0);
+    assert!(off.length() < 0.02, "{}", off.length());
+}
+
+#[test]
+fn a_route_steers_the_way_around_an_object_on_the_straight_line() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let bench = Benchmark::embedded().unwrap();
+    let (_, mut task) = bench.task("train-0001").unwrap();
+    // Another object put halfway along the straight way to the first.
+    let first = task.sequence[0].object.clone();
+    let target = task.objects.iter().find(|o| o.id == first).unwrap().pos;
+    let start = task.start.pos;
+    let mid = [(start[0] + target[0]) / 2.0, (start[1] + target[1]) / 2.0];
+    let blocker = task.objects.iter_mut().find(|o| o.id != first).unwrap();
+    blocker.pos = [mid[0], mid[1], blocker.size[2] / 2.0];
+    blocker.on = Support::Floor;
+    let config = EnvConfig {
+        clear_furniture: true,
+        gait: Some(GaitConfig {
+            route_lookahead: 1.0,
+            start_distance: 0.5,
+            start_distance_max: 10.0,
+            ..GaitConfig::default()
+        }),
+        ..EnvConfig::default()
+    };
+    let mut env = TaskEnv::new(
+        &model,
+        &task,
+        &bench.catalogue,
+        SimConfig::default(),
+        config.clone(),
+    );
+    let route = env.route().expect("a route").to_vec();
+    let mid = [mid[0] as f32, mid[1] as f32];
+    let off = |p: [f32; 2]| (p[0] - mid[0]).hypot(p[1] - mid[1]);
+    // Every point keeps the 0.45 m clearance from the blocker's footprint, so more from its
+    // centre (one 0.1 m cell of slack).
+    let shortest = route.iter().map(|p| off(*p)).fold(f32::MAX, f32::min);
+    assert!(shortest > 0.45 - 0.1, "{shortest}");
+    assert!(env.way_length() > env.first_object_distance() + 0.1);
+    // The start turns along the route, not at the object behind the blocker.
+    let turned = (env.yaw_toward_way() - env.yaw_toward_first_object()).abs();
+    assert!(turned > 0.1, "{turned}");
+    // A start halfway along the way stands on the route, beside the blocker, not in it.
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let half = env.way_length() / 2.0;
+    assert!(env.start_in_gait_on_way(&demo, reference, 0, 0.0, half));
+    let root = env.world.body_states()[0];
+    assert!(off([root.pos.x, root.pos.y]) > 0.45 - 0.1);
+    // Without route_lookahead: no route, the straight way.
+    let mut straight = config;
+    if let Some(g) = straight.gait.as_mut() {
+        g.route_lookahead = 0.0;
+    }
+    let env = TaskEnv::new(
+        &model,
+        &task,
+        &bench.catalogue,
+        SimConfig::default(),
+        straight,
+    );
+    assert!(env.route().is_none());
+    assert_eq!(env.yaw_toward_way(), env.yaw_toward_first_object());
+}
+
+#[test]
 fn a_rest_start_stands_still_at_the_tasks_start_turned_toward_the_object_with_the_gait_running() {
     let model = CharacterModel::amp_humanoid();
     let demo = cycle_demo(&model);
