@@ -653,20 +653,12 @@ mod tests {
     #[test]
     fn a_joined_walk_and_stop_switches_policies_where_the_gait_stops() {
         use lhm_sim::env::GaitConfig;
-        use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+        use lhm_sim::motion::demo::AmpWindow;
         let bench = lhm_scenes::Benchmark::embedded().unwrap();
         let model = CharacterModel::amp_humanoid();
         let sim = SimConfig::default();
-        let demo = DemoMotion::from_clips(
-            &model,
-            vec![(
-                "cycle_walk".into(),
-                lhm_sim::gait::synthetic_cycle_clip(&model).unwrap(),
-                1.0 / 30.0,
-            )],
-            AmpWindow::of(&EnvConfig::default(), &sim),
-        )
-        .unwrap();
+        let window = AmpWindow::of(&EnvConfig::default(), &sim);
+        let demo = lhm_sim::gait::synthetic_cycle_demo(&model, window).unwrap();
         let reference = std::sync::Arc::new(
             lhm_sim::gait::GaitReference::new(&model, &demo, 0, 1.0 / sim.control_hz).unwrap(),
         );

@@ -14,7 +14,7 @@
 
 use crate::fidelity::joint_angles;
 use crate::mjcf::CharacterModel;
-use crate::motion::demo::DemoMotion;
+use crate::motion::demo::{AmpWindow, DemoMotion};
 use crate::motion::retarget::KinematicPose;
 use crate::obs::{heading_yaw, BodyState, HeadingFrame};
 use rapier3d::math::{Rotation, Vector};
@@ -608,4 +608,11 @@ pub fn synthetic_cycle_clip(model: &CharacterModel) -> Option<Vec<KinematicPose>
             })
             .collect(),
     )
+}
+
+/// [`synthetic_cycle_clip`] as a one-clip demo named `cycle_walk` (what [`GaitReference::new`]
+/// and [`reference_for`] take), its AMP features over `window`. `None` where the clip is.
+pub fn synthetic_cycle_demo(model: &CharacterModel, window: AmpWindow) -> Option<DemoMotion> {
+    let clip = synthetic_cycle_clip(model)?;
+    DemoMotion::from_clips(model, vec![("cycle_walk".into(), clip, 1.0 / 30.0)], window).ok()
 }

@@ -7,7 +7,7 @@ use lhm_sim::env::{empty_room, without_furniture, EnvConfig, GaitConfig, TaskEnv
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
     aligned_to, base_targets, braking_targets, reference_for, start_targets, stop_targets,
-    synthetic_cycle_clip, BalanceGains, GaitReference, Rig, StartRamp,
+    synthetic_cycle_clip, synthetic_cycle_demo, BalanceGains, GaitReference, Rig, StartRamp,
 };
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
@@ -254,18 +254,10 @@ fn the_stop_ramp_is_the_start_ramp_backward_and_no_ramp_is_the_neutral_pose_at_o
     );
 }
 
-/// `synthetic_cycle_clip` (1.2 s at 30 fps, thighs swinging, root moving forward) as a one-clip demo.
+/// `synthetic_cycle_demo` (1.2 s at 30 fps, thighs swinging, root moving forward).
 fn cycle_demo(model: &CharacterModel) -> DemoMotion {
-    DemoMotion::from_clips(
-        model,
-        vec![(
-            "cycle_walk".into(),
-            synthetic_cycle_clip(model).unwrap(),
-            1.0 / 30.0,
-        )],
-        AmpWindow::of(&EnvConfig::default(), &SimConfig::default()),
-    )
-    .unwrap()
+    let window = AmpWindow::of(&EnvConfig::default(), &SimConfig::default());
+    synthetic_cycle_demo(model, window).unwrap()
 }
 
 #[test]
