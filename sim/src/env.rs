@@ -155,11 +155,12 @@ pub struct GaitConfig {
     /// at `start_distance` when it is set.
     pub near_start_fraction: f32,
     /// Above `start_distance`: a walking start near the object is drawn instead at a uniform
-    /// distance in [`start_distance`, the smaller of this and the task's start's distance to
-    /// the first object], on the straight way from the task's start to the object (so inside
-    /// the room), heading at the object as the other starts — the long walks a start at rest
-    /// must make, practised from every point of the way. 0 (or ≤ `start_distance`): every such
-    /// start `start_distance` before the object.
+    /// distance in [`start_distance`, the smaller of this and the way's length
+    /// ([`TaskEnv::way_length`])] before the object, on the way from the task's start to it (the
+    /// straight line, or the route with `route_lookahead`; so inside the room), heading where
+    /// the base aims from there — the long walks a start at rest must make, practised from every
+    /// point of the way. 0 (or ≤ `start_distance`): every such start `start_distance` before
+    /// the object.
     pub start_distance_max: f32,
     /// Above 0: the base steers along a route planned around the room's other objects (and
     /// furniture, where the room keeps it) to the first object ([`crate::route`]), at the point
