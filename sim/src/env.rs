@@ -508,16 +508,26 @@ impl TaskEnv {
         }
     }
 
-    /// The yaw (radians) from the task's start toward where the base first aims: along the route
-    /// with `[env.gait] route_lookahead`, else [`Self::yaw_toward_first_object`].
-    pub fn yaw_toward_way(&self) -> f32 {
-        let start = [self.task.start.pos[0] as f32, self.task.start.pos[1] as f32];
-        match self.way_point_from(start).filter(|_| self.route.is_some()) {
-            Some(p) if (p[0] - start[0]).abs() + (p[1] - start[1]).abs() > 1e-6 => {
-                (p[1] - start[1]).atan2(p[0] - start[0])
+    /// The yaw (radians) from `at` toward where the base aims from there
+    /// ([`Self::way_point_from`]); [`Self::yaw_toward_first_object`] where that is `at` itself.
+    fn yaw_toward_way_from(&self, at: [f32; 2]) -> f32 {
+        match self.way_point_from(at) {
+            Some(p) if (p[0] - at[0]).abs() + (p[1] - at[1]).abs() > 1e-6 => {
+                (p[1] - at[1]).atan2(p[0] - at[0])
             }
             _ => self.yaw_toward_first_object(),
         }
+    }
+
+    /// The yaw (radians) from the task's start toward where the base first aims: along the route
+    /// with `[env.gait] route_lookahead`, else [`Self::yaw_toward_first_object`].
+    pub fn yaw_toward_way(&self) -> f32 {
+        if self.route.is_none() {
+            // Exactly the straight yaw (computed in f64), as before routes.
+            return self.yaw_toward_first_object();
+        }
+        let start = [self.task.start.pos[0] as f32, self.task.start.pos[1] as f32];
+        self.yaw_toward_way_from(start)
     }
 
     /// The planned walk to the first object (`[env.gait] route_lookahead`), if any.
@@ -672,12 +682,7 @@ impl TaskEnv {
             }
             (None, _) => start,
         };
-        let aim = self.way_point_from(at).unwrap_or(at);
-        let yaw = if (aim[0] - at[0]).abs() + (aim[1] - at[1]).abs() > 1e-6 {
-            (aim[1] - at[1]).atan2(aim[0] - at[0])
-        } else {
-            self.yaw_toward_first_object()
-        } + yaw_offset;
+        let yaw = self.yaw_toward_way_from(at) + yaw_offset;
         self.start_from_demo_at(demo, reference.clip, reference.time(step), at, yaw);
         self.start_gait(reference, step)
     }

@@ -291,6 +291,23 @@ fn gait_env(model: &CharacterModel, gait: Option<GaitConfig>) -> TaskEnv {
     TaskEnv::new(model, &task, &bench.catalogue, SimConfig::default(), config)
 }
 
+/// The first object's position and the task's start, on the floor (z = 0).
+fn first_object_and_start(env: &TaskEnv) -> (Vector, Vector) {
+    let first = &env.task.sequence[0].object;
+    let o = env.task.objects.iter().find(|o| &o.id == first).unwrap();
+    let start = env.task.start.pos;
+    (
+        Vector::new(o.pos[0] as f32, o.pos[1] as f32, 0.0),
+        Vector::new(start[0] as f32, start[1] as f32, 0.0),
+    )
+}
+
+/// How far (m, horizontally) the character's root is from `p`.
+fn horizontal_root_offset(env: &TaskEnv, p: Vector) -> f32 {
+    let root = env.world.body_states()[0];
+    Vector::new(root.pos.x - p.x, root.pos.y - p.y, 0.0).length()
+}
+
 #[test]
 fn in_the_gait_actions_are_residuals_on_the_base_and_the_policy_reads_the_phase() {
     let model = CharacterModel::amp_humanoid();
@@ -438,14 +455,7 @@ fn a_start_distance_starts_the_gait_that_far_before_the_first_object_heading_at_
         ..GaitConfig::default()
     };
     let mut env = gait_env(&model, Some(gait));
-    let first = &env.task.sequence[0].object;
-    let o = env.task.objects.iter().find(|o| &o.id == first).unwrap();
-    let object = Vector::new(o.pos[0] as f32, o.pos[1] as f32, 0.0);
-    let task_start = Vector::new(
-        env.task.start.pos[0] as f32,
-        env.task.start.pos[1] as f32,
-        0.0,
-    );
+    let (object, task_start) = first_object_and_start(&env);
     let yaw = env.yaw_toward_first_object() + 0.2;
     assert!(env.start_in_gait(&demo, reference, 0, yaw));
     let root = env.world.body_states()[0];
@@ -470,9 +480,8 @@ fn a_start_distance_starts_the_gait_that_far_before_the_first_object_heading_at_
         }),
     );
     assert!(env.start_in_gait_where(&demo, reference, 0, yaw, false));
-    let root = env.world.body_states()[0];
-    let off = Vector::new(root.pos.x - task_start.x, root.pos.y - task_start.y, 0.0);
-    assert!(off.length() < 0.02, "{}", off.length());
+    let off = horizontal_root_offset(&env, task_start);
+    assert!(off < 0.02, "{off}");
 }
 
 #[test]
@@ -485,14 +494,7 @@ fn a_start_on_the_way_is_that_far_before_the_object_on_the_line_from_the_tasks_s
         ..GaitConfig::default()
     };
     let mut env = gait_env(&model, Some(gait.clone()));
-    let first = &env.task.sequence[0].object;
-    let o = env.task.objects.iter().find(|o| &o.id == first).unwrap();
-    let object = Vector::new(o.pos[0] as f32, o.pos[1] as f32, 0.0);
-    let task_start = Vector::new(
-        env.task.start.pos[0] as f32,
-        env.task.start.pos[1] as f32,
-        0.0,
-    );
+    let (object, task_start) = first_object_and_start(&env);
     let way = (object - task_start).length();
     assert!((env.first_object_distance() - way).abs() < 1e-4);
     assert!(way > 0.8, "the fixture's object is {way} m away");
@@ -516,9 +518,8 @@ fn a_start_on_the_way_is_that_far_before_the_object_on_the_line_from_the_tasks_s
     let mut env = gait_env(&model, Some(gait));
     let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
     assert!(env.start_in_gait_on_way(&demo, reference, 0, 0.4, way + 1.0));
-    let root = env.world.body_states()[0];
-    let off = Vector::new(root.pos.x - task_start.x, root.pos.y - task_start.y, 0.0);
-    assert!(off.length() < 0.02, "{}", off.length());
+    let off = horizontal_root_offset(&env, task_start);
+    assert!(off < 0.02, "{off}");
 }
 
 #[test]
