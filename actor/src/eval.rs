@@ -77,10 +77,18 @@ pub fn gait_start_step(task_id: &str, seed: u64, cycle_len: usize) -> usize {
     rng.below(cycle_len)
 }
 
+/// The random stream of the action noise of the `(task, seed)` episode: apart from the stream
+/// that turns its start ([`seeded_task`], [`gait_start_step`]).
+fn action_noise_stream(task_id: &str, seed: u64) -> SplitMix64 {
+    const SALT: u64 = 0x6163_7469_6f6e_5f73; // "action_s"
+    SplitMix64::new(seed_stream(task_id, seed).next_u64() ^ SALT)
+}
+
 struct Slot {
     env: TaskEnv,
     seed: u64,
     action: Vec<f32>,
+    noise: SplitMix64,
     reach_step: Option<u32>,
     result: Option<EpisodeEval>,
 }
@@ -124,6 +132,11 @@ pub struct EvalSetup<'a> {
     /// Ends every episode after at most this many control steps (e.g. 300, 10 s at 30 Hz, to
     /// measure how long a walk stays up); `None`: every pair's cycle time limit.
     pub max_steps: Option<u32>,
+    /// Gaussian noise of this standard deviation added to every action component, as the
+    /// actors' sampled actions carry the policy's `exp(log_std)` in training; 0: the mean
+    /// actions. Each episode draws from its own stream of (task, seed) ([`action_noise_stream`]),
+    /// so results do not depend on `batch` or the job order.
+    pub action_std: f32,
 }
 
 /// What an episode in `[env.gait]` starts from.
@@ -266,6 +279,7 @@ pub fn evaluate<'a>(
                 env: setup.env_for(task, *seed),
                 seed: *seed,
                 action: vec![0.0; act_dim],
+                noise: action_noise_stream(&task.id, *seed),
                 reach_step: None,
                 result: None,
             })
@@ -295,7 +309,11 @@ pub fn evaluate<'a>(
                     .concat();
                 let actions = ac.act_deterministic(&obs)?;
                 for (row, &i) in actions.chunks_exact(act_dim).zip(&acting) {
-                    slots[i].action.copy_from_slice(row);
+                    let slot = &mut slots[i];
+                    slot.action.copy_from_slice(row);
+                    if setup.action_std > 0.0 {
+                        add_noise(&mut slot.action, &mut slot.noise, setup.action_std);
+                    }
                 }
             }
             slots
@@ -318,6 +336,15 @@ pub fn evaluate<'a>(
         progress(out.len());
     }
     Ok(out)
+}
+
+/// Adds `std` times standard normal draws from `rng` to every component of `action`.
+fn add_noise(action: &mut [f32], rng: &mut SplitMix64, std: f32) {
+    let mut draws = vec![0.0f32; action.len()];
+    rng.fill_normal(&mut draws);
+    for (a, n) in action.iter_mut().zip(draws) {
+        *a += std * n;
+    }
 }
 
 /// Mean and sample standard deviation over seeds (std 0 with one seed).
@@ -534,6 +561,7 @@ mod tests {
             language: true,
             gait: None,
             max_steps: None,
+            action_std: 0.0,
         }
     }
 
@@ -861,5 +889,40 @@ mod tests {
         let pairs = jobs[0].0.sequence.len() as u32;
         let limit = pairs * env.switching.max_cycle_steps + EPISODE_SLACK_STEPS;
         assert_eq!(loose.env_for(&jobs[0].0, 0).config.max_episode_steps, limit);
+    }
+
+    #[test]
+    fn action_noise_moves_the_episodes_the_same_way_in_any_batch() {
+        let bench = lhm_scenes::Benchmark::embedded().unwrap();
+        let model = CharacterModel::amp_humanoid();
+        let mut env = EnvConfig::default();
+        env.switching.max_cycle_steps = 30;
+        let sim = SimConfig::default();
+        let ac = ActorCritic::new(
+            TaskEnv::obs_dim(&model, &env),
+            model.dofs.len(),
+            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
+        )
+        .unwrap();
+        let jobs: Vec<(Task, u64)> = bench.tasks(lhm_scenes::Split::Unseen)[..2]
+            .iter()
+            .flat_map(|t| [(t.clone(), 0), (t.clone(), 1)])
+            .collect();
+        let run = |batch, action_std| {
+            let setup = EvalSetup {
+                action_std,
+                ..plain_setup(&model, &bench, &sim, &env, batch)
+            };
+            evaluate(&ac, &setup, &jobs, &|_| {}).unwrap()
+        };
+        let mean = run(4, 0.0);
+        let noisy = run(4, 0.5);
+        // Every episode's own stream: one environment at a time or all four, the same episodes.
+        assert_eq!(run(1, 0.5), noisy);
+        // The noise moved the character: the episodes differ from the mean actions' ones.
+        for (m, n) in mean.iter().zip(&noisy) {
+            assert_eq!((&m.task_id, m.seed), (&n.task_id, n.seed));
+            assert!(m.steps != n.steps || m.dist != n.dist, "{m:?} {n:?}");
+        }
     }
 }

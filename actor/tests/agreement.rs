@@ -49,6 +49,7 @@ fn the_probe_measures_the_vla_against_its_labeller_with_and_without_words() {
         language: true,
         gait: None,
         max_steps: None,
+        action_std: 0.0,
     };
     // One step, by hand: the same environment, the same three actions.
     let one = vla_agreement(&vla, &labeller, &setup, tasks, 1).unwrap();

@@ -62,6 +62,11 @@ pub struct EvalArgs {
     /// how long a walk stays up within 10 s (`mean_steps`). Default: every pair's cycle limit.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub(crate) max_steps: Option<u32>,
+    /// Add Gaussian noise of this standard deviation to every action (the policy's
+    /// `exp(log_std)`, e.g. 0.0302 for log-std -3.5, is what the actors sample in training);
+    /// each episode's noise is its own (task, seed) stream. Default 0: the mean actions.
+    #[arg(long, default_value_t = 0.0)]
+    pub(crate) action_std: f32,
     /// Also write a GIF of each of the first N episodes (mean actions, third person, until the
     /// episode ends; 10 fps) into the --output directory, named `<task>-s<seed>.gif`.
     #[arg(long, default_value_t = 0)]
@@ -148,6 +153,15 @@ pub(crate) fn split_tasks(bench: &Benchmark, name: &str) -> Result<Vec<Task>> {
 pub fn run(a: EvalArgs) -> Result<()> {
     if a.seeds == 0 {
         bail!("--seeds must be at least 1");
+    }
+    if !(a.action_std.is_finite() && a.action_std >= 0.0) {
+        bail!(
+            "--action-std {}: must be a finite number >= 0",
+            a.action_std
+        );
+    }
+    if a.gifs > 0 && a.action_std > 0.0 {
+        bail!("--gifs shows the mean actions: run it without --action-std");
     }
     if a.gifs > 0 && a.output.is_none() {
         bail!("--gifs needs --output DIR (where the GIFs go)");
@@ -269,6 +283,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         language: !a.no_language,
         gait,
         max_steps: a.max_steps,
+        action_std: a.action_std,
     };
     let episodes = evaluate(policy, &setup, &jobs, &|done| {
         bar.set_position(done as u64);
@@ -295,6 +310,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         "tasks": tasks.len(),
         "seeds": a.seeds,
         "max_steps": a.max_steps,
+        "action_std": a.action_std,
         "from_rest": a.from_rest,
         "episodes": table.episodes,
         "start_yaw_jitter_rad": START_YAW_JITTER,

@@ -597,6 +597,7 @@ fn evaluate(
                 batch: 64,
                 gifs: 0,
                 max_steps: None,
+                action_std: 0.0,
                 no_language: row.no_language,
                 from_rest: false,
                 scenes: scenes.clone(),

@@ -294,6 +294,7 @@ fn evaluation(
         batch: 64,
         gifs: 0,
         max_steps: None,
+        action_std: 0.0,
         no_language: false,
         from_rest: false,
         scenes: args.scenes.clone(),

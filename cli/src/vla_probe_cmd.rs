@@ -78,6 +78,7 @@ pub fn run(a: VlaProbeArgs) -> Result<()> {
         language: true,
         gait: None,
         max_steps: None,
+        action_std: 0.0,
     };
     let mut rows = Vec::new();
     for split in &a.splits {
