@@ -236,6 +236,48 @@ pub struct Rollout {
     view: Option<VlaView>,
 }
 
+/// Where an episode of a `[env.gait]` run starts ([`draw_gait_start`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum GaitStartDraw {
+    /// Still, at the task's start (`rest_start_fraction`).
+    Rest,
+    /// Walking, this far (m) before the first object on the way (`start_distance_max`).
+    OnWay(f32),
+    /// Walking, `start_distance` before the object (`near`) or at the task's start.
+    Walking { near: bool },
+}
+
+/// Draws an episode's gait start from `rng`: at rest with `rest_start_fraction`, else near the
+/// object with `near_start_fraction`, and a near start anywhere on the way, uniform from
+/// `start_distance` to the smaller of `start_distance_max` and `way_length()`, when that is
+/// longer. A setting that mixes nothing draws nothing, so runs without it keep their random
+/// streams.
+fn draw_gait_start(
+    gait: Option<&lhm_sim::env::GaitConfig>,
+    way_length: impl FnOnce() -> f32,
+    rng: &mut SplitMix64,
+) -> GaitStartDraw {
+    let Some(g) = gait else {
+        return GaitStartDraw::Walking { near: false };
+    };
+    if g.rest_start_fraction > 0.0 && (rng.next_f64() as f32) < g.rest_start_fraction {
+        return GaitStartDraw::Rest;
+    }
+    let near = if g.start_distance > 0.0 && g.near_start_fraction < 1.0 {
+        (rng.next_f64() as f32) < g.near_start_fraction
+    } else {
+        g.start_distance > 0.0
+    };
+    if near && g.start_distance_max > g.start_distance {
+        let hi = g.start_distance_max.min(way_length());
+        if hi > g.start_distance {
+            let d = g.start_distance + (hi - g.start_distance) * rng.next_f64() as f32;
+            return GaitStartDraw::OnWay(d);
+        }
+    }
+    GaitStartDraw::Walking { near }
+}
+
 impl Rollout {
     pub fn new(
         spec: RunSpec,
@@ -477,37 +519,17 @@ impl Rollout {
             let step = rng.below(gait.len());
             let noise = (2.0 * rng.next_f64() as f32 - 1.0) * self.spec.env.demo_start_yaw_noise;
             let yaw = env.yaw_toward_way() + noise;
-            // At rest ([env.gait] rest_start_fraction), else near the object or at the task's
-            // start (near_start_fraction); no draw unless the run mixes them, so other runs keep
-            // their random streams.
-            let rest = match self.spec.env.gait.as_ref() {
-                Some(g) if g.rest_start_fraction > 0.0 => {
-                    (rng.next_f64() as f32) < g.rest_start_fraction
+            match draw_gait_start(self.spec.env.gait.as_ref(), || env.way_length(), rng) {
+                GaitStartDraw::Rest => {
+                    env.start_at_rest_in_gait(Arc::clone(gait), step, yaw);
                 }
-                _ => false,
-            };
-            if rest {
-                env.start_at_rest_in_gait(Arc::clone(gait), step, yaw);
-                return env;
-            }
-            let near = match self.spec.env.gait.as_ref() {
-                Some(g) if g.start_distance > 0.0 && g.near_start_fraction < 1.0 => {
-                    (rng.next_f64() as f32) < g.near_start_fraction
-                }
-                Some(g) => g.start_distance > 0.0,
-                None => false,
-            };
-            if let Some(g) = self.spec.env.gait.as_ref().filter(|_| near) {
-                // Anywhere on the way (start_distance_max): drawn only when the way is longer
-                // than start_distance, so runs without it keep their random streams.
-                let hi = g.start_distance_max.min(env.way_length());
-                if hi > g.start_distance {
-                    let d = g.start_distance + (hi - g.start_distance) * rng.next_f64() as f32;
+                GaitStartDraw::OnWay(d) => {
                     env.start_in_gait_on_way(demo, Arc::clone(gait), step, noise, d);
-                    return env;
+                }
+                GaitStartDraw::Walking { near } => {
+                    env.start_in_gait_where(demo, Arc::clone(gait), step, yaw, near);
                 }
             }
-            env.start_in_gait_where(demo, Arc::clone(gait), step, yaw, near);
         } else if let Some(demo) = &self.demo {
             let rng = &mut self.rng;
             if (rng.next_f64() as f32) < self.spec.env.demo_start_probability {
@@ -783,5 +805,86 @@ impl Rollout {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lhm_sim::env::GaitConfig;
+
+    fn gait(rest: f32, near: f32, max: f32) -> GaitConfig {
+        GaitConfig {
+            start_distance: 1.2,
+            rest_start_fraction: rest,
+            near_start_fraction: near,
+            start_distance_max: max,
+            ..GaitConfig::default()
+        }
+    }
+
+    #[test]
+    fn gait_starts_mix_rest_and_walks_anywhere_on_the_way_up_to_its_length() {
+        let g = gait(0.5, 1.0, 5.0);
+        let mut rng = SplitMix64::new(11);
+        let draws: Vec<GaitStartDraw> = (0..4000)
+            .map(|_| draw_gait_start(Some(&g), || 3.0, &mut rng))
+            .collect();
+        let rest = draws.iter().filter(|d| **d == GaitStartDraw::Rest).count();
+        let on_way: Vec<f32> = draws
+            .iter()
+            .filter_map(|d| match d {
+                GaitStartDraw::OnWay(x) => Some(*x),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            rest + on_way.len(),
+            draws.len(),
+            "only rest and on-way starts"
+        );
+        assert!((1850..2150).contains(&rest), "{rest} of 4000 at rest");
+        // Uniform from start_distance (1.2) to the way's length (3.0 < start_distance_max).
+        assert!(on_way.iter().all(|d| (1.2..=3.0).contains(d)), "{on_way:?}");
+        let mean = on_way.iter().sum::<f32>() / on_way.len() as f32;
+        assert!((mean - 2.1).abs() < 0.05, "mean distance {mean}");
+        let far = on_way.iter().filter(|d| **d > 2.7).count() as f32 / on_way.len() as f32;
+        assert!((far - 1.0 / 6.0).abs() < 0.03, "share beyond 2.7 m {far}");
+    }
+
+    #[test]
+    fn a_way_no_longer_than_start_distance_starts_near_and_the_cap_bounds_long_ways() {
+        let mut rng = SplitMix64::new(3);
+        let g = gait(0.0, 1.0, 5.0);
+        assert_eq!(
+            draw_gait_start(Some(&g), || 1.0, &mut rng),
+            GaitStartDraw::Walking { near: true }
+        );
+        for _ in 0..200 {
+            match draw_gait_start(Some(&g), || 9.0, &mut rng) {
+                GaitStartDraw::OnWay(d) => assert!((1.2..=5.0).contains(&d), "{d}"),
+                other => panic!("{other:?}"),
+            }
+        }
+        // near_start_fraction 0: every walking start at the task's start.
+        let g = gait(0.0, 0.0, 5.0);
+        assert_eq!(
+            draw_gait_start(Some(&g), || 9.0, &mut rng),
+            GaitStartDraw::Walking { near: false }
+        );
+    }
+
+    #[test]
+    fn a_run_that_mixes_no_starts_draws_nothing_from_the_stream() {
+        // start_distance alone (the near starts of earlier runs): always near, no draw, and the
+        // way's length is not even asked for.
+        let mut rng = SplitMix64::new(5);
+        let before = rng.state();
+        let g = gait(0.0, 1.0, 0.0);
+        let draw = draw_gait_start(Some(&g), || panic!("way length asked"), &mut rng);
+        assert_eq!(draw, GaitStartDraw::Walking { near: true });
+        let none = draw_gait_start(None, || panic!("way length asked"), &mut rng);
+        assert_eq!(none, GaitStartDraw::Walking { near: false });
+        assert_eq!(rng.state(), before);
     }
 }
