@@ -565,6 +565,24 @@ mod tests {
         }
     }
 
+    /// A policy with a small hidden layer and its initial weights, for `env`'s observations.
+    fn untrained_policy(model: &CharacterModel, env: &EnvConfig) -> ActorCritic {
+        ActorCritic::new(
+            TaskEnv::obs_dim(model, env),
+            model.dofs.len(),
+            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
+        )
+        .unwrap()
+    }
+
+    /// Seeds 0 and 1 of the first two unseen tasks, in that order.
+    fn two_seeds_of_two_unseen_tasks(bench: &lhm_scenes::Benchmark) -> Vec<(Task, u64)> {
+        bench.tasks(lhm_scenes::Split::Unseen)[..2]
+            .iter()
+            .flat_map(|t| [(t.clone(), 0), (t.clone(), 1)])
+            .collect()
+    }
+
     fn episode(seed: u64, success: &[bool], dist: &[f32], fell: bool) -> EpisodeEval {
         EpisodeEval {
             task_id: format!("t{seed}"),
@@ -643,17 +661,8 @@ mod tests {
         let mut env = EnvConfig::default();
         env.switching.max_cycle_steps = 8;
         let sim = SimConfig::default();
-        let ac = ActorCritic::new(
-            TaskEnv::obs_dim(&model, &env),
-            model.dofs.len(),
-            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
-        )
-        .unwrap();
-        let tasks = &bench.tasks(lhm_scenes::Split::Unseen)[..2];
-        let jobs: Vec<(Task, u64)> = tasks
-            .iter()
-            .flat_map(|t| [(t.clone(), 0), (t.clone(), 1)])
-            .collect();
+        let ac = untrained_policy(&model, &env);
+        let jobs = two_seeds_of_two_unseen_tasks(&bench);
         let seen = std::sync::atomic::AtomicUsize::new(0);
         let run = || {
             let setup = plain_setup(&model, &bench, &sim, &env, 3);
@@ -862,12 +871,7 @@ mod tests {
         let model = CharacterModel::amp_humanoid();
         let env = EnvConfig::default();
         let sim = SimConfig::default();
-        let ac = ActorCritic::new(
-            TaskEnv::obs_dim(&model, &env),
-            model.dofs.len(),
-            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
-        )
-        .unwrap();
+        let ac = untrained_policy(&model, &env);
         let jobs: Vec<(Task, u64)> = bench.tasks(lhm_scenes::Split::Unseen)[..2]
             .iter()
             .map(|t| (t.clone(), 0))
@@ -898,16 +902,8 @@ mod tests {
         let mut env = EnvConfig::default();
         env.switching.max_cycle_steps = 30;
         let sim = SimConfig::default();
-        let ac = ActorCritic::new(
-            TaskEnv::obs_dim(&model, &env),
-            model.dofs.len(),
-            &lhm_nets::ActorCriticConfig::with_hidden(&[16]),
-        )
-        .unwrap();
-        let jobs: Vec<(Task, u64)> = bench.tasks(lhm_scenes::Split::Unseen)[..2]
-            .iter()
-            .flat_map(|t| [(t.clone(), 0), (t.clone(), 1)])
-            .collect();
+        let ac = untrained_policy(&model, &env);
+        let jobs = two_seeds_of_two_unseen_tasks(&bench);
         let run = |batch, action_std| {
             let setup = EvalSetup {
                 action_std,
