@@ -4,7 +4,7 @@
 
 use crate::gait::{
     aligned_to, base_targets, start_targets, steer, stop_targets, BalanceGains, GaitReference, Rig,
-    StartRamp,
+    StartRamp, CONTACT_HEIGHT,
 };
 use crate::mjcf::{CharacterModel, JointKind};
 use crate::motion::demo::DemoMotion;
@@ -146,6 +146,16 @@ pub struct GaitConfig {
     /// `[env.gait.stop]` ramp, after it) for the rest of the episode, and the phase reads as
     /// zeros. 0: never stop.
     pub stop_distance: f32,
+    /// When the base, once within `stop_distance`, stops: at once (`distance`, the default), or
+    /// walking on to the reference's next footfall (`footfall`) or until both feet are on the
+    /// ground (`feet-down`), at most half a cycle later ([`stop_now`]). A stop at once freezes
+    /// the walk wherever it is in the cycle, often on one foot mid-swing.
+    pub stop_on: StopOn,
+    /// After the stop the imitation term tracks the neutral standing pose (a fresh world's,
+    /// moved onto the character's heading and ground position, at rest) instead of paying 0:
+    /// the stand gets the dense shaping toward upright, still and feet under the body that the
+    /// walk's tracking gives the walk. Off: only `alive` and the task terms pay for standing.
+    pub stand_imitation: bool,
     /// Starts this far (m, horizontally) before the first object, heading at it, instead of at
     /// the task's start: episodes about the stop alone. 0: the task's start.
     pub start_distance: f32,
@@ -197,6 +207,8 @@ impl Default for GaitConfig {
             steer_gain: 0.1,
             steer_max: 0.2,
             stop_distance: 0.0,
+            stop_on: StopOn::Distance,
+            stand_imitation: false,
             start_distance: 0.0,
             near_start_fraction: 1.0,
             start_distance_max: 0.0,
@@ -212,12 +224,47 @@ impl Default for GaitConfig {
     }
 }
 
+/// `[env.gait] stop_on`: when the base stops once within `stop_distance` of the object.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StopOn {
+    /// At once.
+    #[default]
+    Distance,
+    /// At the gait reference's next footfall (its stance foot changes).
+    Footfall,
+    /// Once both of the character's feet are on the ground.
+    FeetDown,
+}
+
+/// Whether a base that came within its stop distance `armed_for` steps ago stops now: at once
+/// for [`StopOn::Distance`], else at the first footfall (`footfall`: the reference's; `feet_down`:
+/// the character's two feet on the ground), and at the latest after `half_cycle` steps (a
+/// stride's length: a missed footfall must not walk the character into the object).
+pub fn stop_now(
+    stop_on: StopOn,
+    armed_for: usize,
+    half_cycle: usize,
+    footfall: bool,
+    feet_down: bool,
+) -> bool {
+    armed_for >= half_cycle
+        || match stop_on {
+            StopOn::Distance => true,
+            StopOn::Footfall => footfall,
+            StopOn::FeetDown => feet_down,
+        }
+}
+
 /// The gait an episode runs: its cycle and where in it the next step is.
 #[derive(Clone, Debug)]
 struct GaitRun {
     reference: Arc<GaitReference>,
     step: usize,
-    /// The gait came within `stop_distance` of an object and stands from then on.
+    /// The episode's step count when the gait came within `stop_distance` of the object (it
+    /// stops then or at the footfall `stop_on` waits for).
+    armed_at: Option<u32>,
+    /// The gait stopped ([`stop_now`]) and stands from then on.
     stopped: bool,
     /// The episode's step count when it stopped (the stop ramp's clock).
     stopped_at: u32,
@@ -354,6 +401,9 @@ pub struct TaskEnv {
     gait: Option<GaitRun>,
     /// With `[env.gait] route_lookahead`: the planned walk to the first object.
     route: Option<Arc<Vec<[f32; 2]>>>,
+    /// The fresh world's body states (the neutral pose, standing at rest): with `[env.gait]
+    /// stand_imitation`, the imitation target after the stop.
+    standing: Vec<BodyState>,
 }
 
 /// Snapshot of a whole environment: world, cycle state, AMP history, counters.
@@ -404,6 +454,11 @@ impl TaskEnv {
         let mut amp = AmpHistory::new(config.amp_frames, amp_frame_dim(model));
         let prev_bodies = world.body_states();
         amp.push(amp_frame(model, &prev_bodies));
+        let standing = if config.gait.as_ref().is_some_and(|g| g.stand_imitation) {
+            prev_bodies.clone()
+        } else {
+            Vec::new()
+        };
         Self {
             model: model.clone(),
             task: task.clone(),
@@ -435,6 +490,7 @@ impl TaskEnv {
             rig,
             gait: None,
             route,
+            standing,
         }
     }
 
@@ -605,6 +661,7 @@ impl TaskEnv {
         self.gait = Some(GaitRun {
             reference,
             step,
+            armed_at: None,
             stopped: false,
             stopped_at: 0,
             from_rest: false,
@@ -938,9 +995,26 @@ impl TaskEnv {
             self.config.gait.as_ref()?,
         );
         if let Some(to) = object.filter(|_| !run.stopped) {
-            if Vector::new(to.x, to.y, 0.0).length() < config.stop_distance {
-                run.stopped = true;
-                run.stopped_at = self.steps;
+            if run.armed_at.is_none()
+                && Vector::new(to.x, to.y, 0.0).length() < config.stop_distance
+            {
+                run.armed_at = Some(self.steps);
+            }
+            if let Some(armed) = run.armed_at {
+                let feet_down = rig
+                    .foot
+                    .iter()
+                    .all(|&f| now.get(f).is_some_and(|b| b.pos.z < CONTACT_HEIGHT));
+                if stop_now(
+                    config.stop_on,
+                    self.steps.saturating_sub(armed) as usize,
+                    run.reference.len() / 2,
+                    run.reference.footfall(rig, run.step),
+                    feet_down,
+                ) {
+                    run.stopped = true;
+                    run.stopped_at = self.steps;
+                }
             }
         }
         let (reference_now, angles) = run.reference.at(run.step);
@@ -1103,18 +1177,24 @@ impl TaskEnv {
     /// The imitation term after a step. While a gait walks: its reference's frame for now, moved
     /// onto the character's heading and ground position ([`aligned_to`]), so the walk is tracked
     /// wherever the steering took it (DeepMimic's phase-indexed target, DReCon's kinematic
-    /// reference). Otherwise the demo start's track, in the world. 0 when the weight is 0.
+    /// reference). After the gait's stop: the standing pose so moved with `stand_imitation`,
+    /// else 0. Otherwise the demo start's track, in the world. 0 when the weight is 0.
     fn imitation(&self, bodies: &[BodyState]) -> f32 {
         if self.config.weights.imitation == 0.0 {
             return 0.0;
         }
         if let Some(run) = self.gait.as_ref() {
-            if run.stopped {
-                return 0.0;
-            }
             let Some(root) = bodies.first() else {
                 return 0.0;
             };
+            if run.stopped {
+                // Empty unless `stand_imitation` (the constructor keeps the pose only then).
+                if self.standing.is_empty() {
+                    return 0.0;
+                }
+                let target = aligned_to(&self.standing, root);
+                return rewards::imitation(bodies, &target, &self.end_effectors);
+            }
             let target = aligned_to(run.reference.at(run.step).0, root);
             return rewards::imitation(bodies, &target, &self.end_effectors);
         }

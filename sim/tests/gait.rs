@@ -3,7 +3,9 @@
 //! residual actions and phase observation.
 
 use lhm_scenes::{Benchmark, Support};
-use lhm_sim::env::{empty_room, without_furniture, EnvConfig, GaitConfig, TaskEnv};
+use lhm_sim::env::{
+    empty_room, stop_now, without_furniture, EnvConfig, GaitConfig, StopOn, TaskEnv,
+};
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
     aligned_to, base_targets, braking_targets, reference_for, start_targets, stop_targets,
@@ -394,6 +396,112 @@ fn within_the_stop_distance_the_base_stands_and_the_phase_reads_zero() {
     assert_eq!(&env.observation()[dim - 2..], &[0.0, 0.0]);
     let after = joint_angles(&model, &env.world.body_states())[hip].abs();
     assert!(after < before - 0.1, "hip {before} -> {after}");
+}
+
+#[test]
+fn a_stop_waits_for_its_footfall_at_most_half_a_cycle() {
+    // (armed for, footfall, feet down) -> stops now, for each rule; half a cycle is 18 steps.
+    let cases = [
+        (0, false, false, [true, false, false]),
+        (3, true, false, [true, true, false]),
+        (3, false, true, [true, false, true]),
+        (17, false, false, [true, false, false]),
+        (18, false, false, [true, true, true]),
+    ];
+    for (armed, footfall, feet, expect) in cases {
+        let got = [StopOn::Distance, StopOn::Footfall, StopOn::FeetDown]
+            .map(|rule| stop_now(rule, armed, 18, footfall, feet));
+        assert_eq!(
+            got, expect,
+            "armed {armed}, footfall {footfall}, feet {feet}"
+        );
+    }
+    // The config's spelling (TOML's is the same through serde).
+    let g: GaitConfig = serde_json::from_str(r#"{"stop_on": "feet-down"}"#).unwrap();
+    assert_eq!(g.stop_on, StopOn::FeetDown);
+    assert_eq!(GaitConfig::default().stop_on, StopOn::Distance);
+    assert!(serde_json::from_str::<GaitConfig>(r#"{"stop_on": "later"}"#).is_err());
+}
+
+#[test]
+fn with_stop_on_footfall_the_base_walks_on_to_the_references_next_footfall() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = stepping_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let rig = Rig::new(&model).unwrap();
+    // Armed at the first step (within 100 m), from cycle step 9: the first footfall after it.
+    let first = (9..9 + reference.len())
+        .find(|&k| reference.footfall(&rig, k))
+        .expect("the cycle has footfalls");
+    assert!(first > 9, "the test needs a start between footfalls");
+    let gait = GaitConfig {
+        stop_distance: 100.0,
+        stop_on: StopOn::Footfall,
+        ..GaitConfig::default()
+    };
+    let mut env = gait_env(&model, Some(gait));
+    let yaw = env.yaw_toward_first_object();
+    assert!(env.start_in_gait(&demo, reference, 9, yaw));
+    let zero = vec![0.0; model.dofs.len()];
+    for k in 9..first {
+        env.step(&zero);
+        assert!(env.gait_phase().is_some(), "walking on at cycle step {k}");
+    }
+    env.step(&zero);
+    assert_eq!(
+        env.gait_phase(),
+        None,
+        "stopped at the footfall (step {first})"
+    );
+}
+
+#[test]
+fn with_stand_imitation_the_stop_tracks_the_standing_pose() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    // Started at rest (the standing pose) and stopped at once: the first steps' imitation term.
+    let terms = |stand_imitation: bool, action: f32| {
+        let gait = GaitConfig {
+            stop_distance: 100.0,
+            stand_imitation,
+            ..GaitConfig::default()
+        };
+        let mut config = EnvConfig {
+            gait: Some(gait),
+            ..EnvConfig::default()
+        };
+        config.weights.imitation = 1.0;
+        let bench = Benchmark::embedded().unwrap();
+        let (_, task) = bench.task("train-0001").unwrap();
+        let mut env = TaskEnv::new(
+            &model,
+            &task,
+            &bench.catalogue,
+            SimConfig::default(),
+            config,
+        );
+        let yaw = env.yaw_toward_first_object();
+        assert!(env.start_at_rest_in_gait(Arc::clone(&reference), 0, yaw));
+        let action: Vec<f32> = (0..model.dofs.len())
+            .map(|i| if i % 2 == 0 { action } else { -action })
+            .collect();
+        (0..10)
+            .map(|_| env.step(&action).terms.imitation)
+            .collect::<Vec<f32>>()
+    };
+    let standing = terms(true, 0.0);
+    assert!(
+        standing.iter().all(|&t| t > 0.8),
+        "standing still in the standing pose: {standing:?}"
+    );
+    let bent = terms(true, 1.0);
+    assert!(bent[9] < standing[9] - 0.2, "{bent:?} vs {standing:?}");
+    assert_eq!(
+        terms(false, 0.0),
+        vec![0.0; 10],
+        "off: the stop pays no tracking"
+    );
 }
 
 #[test]
