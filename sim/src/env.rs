@@ -1001,16 +1001,12 @@ impl TaskEnv {
                 run.armed_at = Some(self.steps);
             }
             if let Some(armed) = run.armed_at {
-                let feet_down = rig
-                    .foot
-                    .iter()
-                    .all(|&f| now.get(f).is_some_and(|b| b.pos.z < CONTACT_HEIGHT));
                 if stop_now(
                     config.stop_on,
                     self.steps.saturating_sub(armed) as usize,
                     run.reference.len() / 2,
                     run.reference.footfall(rig, run.step),
-                    feet_down,
+                    rig.feet_down(&now, CONTACT_HEIGHT),
                 ) {
                     run.stopped = true;
                     run.stopped_at = self.steps;

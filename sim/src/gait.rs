@@ -192,6 +192,13 @@ impl Rig {
     pub fn stance(&self, frame: &[BodyState]) -> usize {
         usize::from(frame[self.foot[1]].pos.z < frame[self.foot[0]].pos.z)
     }
+
+    /// Whether both feet's origins are below `height` (a body missing from `now` counts as up).
+    pub fn feet_down(&self, now: &[BodyState], height: f32) -> bool {
+        self.foot
+            .iter()
+            .all(|&f| now.get(f).is_some_and(|b| b.pos.z < height))
+    }
 }
 
 /// What the feedback compares between the character and its reference, each in its own heading

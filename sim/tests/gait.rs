@@ -10,6 +10,7 @@ use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
     aligned_to, base_targets, braking_targets, reference_for, start_targets, stop_targets,
     synthetic_cycle_clip, synthetic_cycle_demo, BalanceGains, GaitReference, Rig, StartRamp,
+    CONTACT_HEIGHT,
 };
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
@@ -42,6 +43,29 @@ fn stride(model: &CharacterModel) -> Vec<BodyState> {
 
 fn dof(model: &CharacterModel, name: &str) -> usize {
     model.dofs.iter().position(|d| d.name == name).unwrap()
+}
+
+#[test]
+fn feet_are_down_when_both_origins_are_below_the_height_and_a_missing_foot_is_up() {
+    let model = CharacterModel::amp_humanoid();
+    let rig = Rig::new(&model).unwrap();
+    let mut frame = stride(&model);
+    for &f in &rig.foot {
+        frame[f].pos.z = 0.05;
+    }
+    assert!(rig.feet_down(&frame, CONTACT_HEIGHT));
+    assert!(!rig.feet_down(&frame, 0.04), "below 0.05 m only");
+    frame[rig.foot[1]].pos.z = 0.2;
+    assert!(
+        !rig.feet_down(&frame, CONTACT_HEIGHT),
+        "one foot in the air"
+    );
+    frame[rig.foot[1]].pos.z = 0.05;
+    let short = &frame[..rig.foot[0].min(rig.foot[1])];
+    assert!(
+        !rig.feet_down(short, CONTACT_HEIGHT),
+        "a frame without the feet"
+    );
 }
 
 #[test]
@@ -283,14 +307,21 @@ fn the_cycle_is_sampled_at_the_control_step_and_wraps() {
     assert!(err.contains("\"run\""), "{err}");
 }
 
-fn gait_env(model: &CharacterModel, gait: Option<GaitConfig>) -> TaskEnv {
+/// An environment on the embedded benchmark's task train-0001 with `config`.
+fn task_env(model: &CharacterModel, config: EnvConfig) -> TaskEnv {
     let bench = Benchmark::embedded().unwrap();
     let (_, task) = bench.task("train-0001").unwrap();
-    let config = EnvConfig {
-        gait,
-        ..EnvConfig::default()
-    };
     TaskEnv::new(model, &task, &bench.catalogue, SimConfig::default(), config)
+}
+
+fn gait_env(model: &CharacterModel, gait: Option<GaitConfig>) -> TaskEnv {
+    task_env(
+        model,
+        EnvConfig {
+            gait,
+            ..EnvConfig::default()
+        },
+    )
 }
 
 /// The first object's position and the task's start, on the floor (z = 0).
@@ -472,15 +503,7 @@ fn with_stand_imitation_the_stop_tracks_the_standing_pose() {
             ..EnvConfig::default()
         };
         config.weights.imitation = 1.0;
-        let bench = Benchmark::embedded().unwrap();
-        let (_, task) = bench.task("train-0001").unwrap();
-        let mut env = TaskEnv::new(
-            &model,
-            &task,
-            &bench.catalogue,
-            SimConfig::default(),
-            config,
-        );
+        let mut env = task_env(&model, config);
         let yaw = env.yaw_toward_first_object();
         assert!(env.start_at_rest_in_gait(Arc::clone(&reference), 0, yaw));
         let action: Vec<f32> = (0..model.dofs.len())
@@ -900,8 +923,6 @@ fn in_a_gait_run_the_imitation_term_tracks_the_gait_wherever_it_heads() {
     let demo = cycle_demo(&model);
     let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
     let env_with = |imitation: f32| {
-        let bench = Benchmark::embedded().unwrap();
-        let (_, task) = bench.task("train-0001").unwrap();
         // No steering: it would turn the two headings below differently.
         let mut config = EnvConfig {
             gait: Some(GaitConfig {
@@ -912,13 +933,7 @@ fn in_a_gait_run_the_imitation_term_tracks_the_gait_wherever_it_heads() {
             ..EnvConfig::default()
         };
         config.weights.imitation = imitation;
-        TaskEnv::new(
-            &model,
-            &task,
-            &bench.catalogue,
-            SimConfig::default(),
-            config,
-        )
+        task_env(&model, config)
     };
     let zero = vec![0.0; model.dofs.len()];
     // The same start turned two ways earns the same tracking (the course is free).

@@ -51,7 +51,7 @@ use lhm_sim::obs::HeadingFrame;
 use lhm_sim::render::{render, write_gif, Camera, Image};
 use lhm_sim::{CharacterModel, SimConfig};
 use rapier3d::math::Vector;
-use stop::{add_brake, feet_down, stand_targets, StandGains, StandHold};
+use stop::{add_brake, stand_targets, StandGains, StandHold};
 
 struct Setup {
     model: CharacterModel,
@@ -212,7 +212,7 @@ fn rollout_traced(
                         && if s.stop_on_footfall {
                             s.reference.footfall(&s.rig, step)
                         } else {
-                            feet_down(&s.rig, &now, s.stop_height)
+                            s.rig.feet_down(&now, s.stop_height)
                         })
             })
         {
@@ -220,7 +220,7 @@ fn rollout_traced(
             if trace {
                 println!(
                     "  stop at k {k}: feet down {}, heights {:.3} {:.3}, root h {:.2}",
-                    feet_down(&s.rig, &now, s.stop_height),
+                    s.rig.feet_down(&now, s.stop_height),
                     now[s.rig.foot[0]].pos.z,
                     now[s.rig.foot[1]].pos.z,
                     now[0].pos.z

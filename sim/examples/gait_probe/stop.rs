@@ -124,11 +124,6 @@ impl StandHold {
     }
 }
 
-/// Whether both feet's origins are below `height` (m; `CONTACT_HEIGHT`: on the ground).
-pub fn feet_down(rig: &Rig, now: &[BodyState], height: f32) -> bool {
-    rig.foot.iter().all(|&f| now[f].pos.z < height)
-}
-
 /// PD targets that stand in `hold`: its joint angles with ankle and hip strategies moving the
 /// centre of mass back over the middle of the feet and the pelvis and torso back to its tilt.
 /// A stop is a motion that keeps both feet where they landed, not a switch to the neutral pose
