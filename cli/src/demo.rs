@@ -21,7 +21,8 @@ impl DemoSource for ClipFeatures {
     }
 }
 
-/// Loads every installed clip (DeepMimic and OMOMO), windowed like the environment's AMP history.
+/// Loads every installed clip (DeepMimic and OMOMO), windowed like the environment's AMP history,
+/// sampled by `[amp] demo_weights`.
 pub fn load(dir: Option<PathBuf>, config: &TrainConfig) -> Result<Box<dyn DemoSource>> {
     let dir = dir.unwrap_or_else(lhm_sim::motion::default_dir);
     let model = CharacterModel::amp_humanoid();
@@ -32,12 +33,17 @@ pub fn load(dir: Option<PathBuf>, config: &TrainConfig) -> Result<Box<dyn DemoSo
                  --motion-dir, or train without AMP with --no-amp)",
                 dir.display()
             )
-        })?;
+        })?
+        .with_source_weights(config.amp.demo_weights)?;
     let clips: Vec<String> = motion
         .clips()
         .map(|(name, d)| format!("{name} {d:.1}s"))
         .collect();
-    tracing::info!("AMP demo motion: {}", clips.join(", "));
+    tracing::info!(
+        "AMP demo motion: {} (per-second weights {:?})",
+        clips.join(", "),
+        config.amp.demo_weights
+    );
     Ok(Box::new(ClipFeatures {
         motion,
         rng: SplitMix64::new(0x00A3_0DE3),

@@ -40,6 +40,9 @@ pub struct AmpConfig {
     /// file): no cap.
     #[serde(default)]
     pub style_cap_floor: Option<f64>,
+    /// How much of the demo each clip source gives, per second of clip (`{ deepmimic = 1,
+    /// omomo = 0 }`: the walks only). Default 1 and 1.
+    pub demo_weights: lhm_sim::motion::SourceWeights,
 }
 
 impl Default for AmpConfig {
@@ -66,6 +69,7 @@ impl Default for AmpConfig {
             style_reward_weight: 0.5,
             seed: 0,
             style_cap_floor: None,
+            demo_weights: lhm_sim::motion::SourceWeights::default(),
         }
     }
 }

@@ -232,6 +232,10 @@ impl TrainConfig {
                 )));
             }
         }
+        self.amp
+            .demo_weights
+            .check()
+            .map_err(|e| ServiceError::Config(format!("amp.demo_weights: {e}")))?;
         if let Some(g) = self.env.gait.as_ref() {
             for (name, f) in [
                 ("near_start_fraction", g.near_start_fraction),
@@ -1399,6 +1403,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn demo_weights_read_key_by_key_and_bad_ones_are_refused_by_name() {
+        let dir = std::env::temp_dir().join(format!("lhm-demo-weights-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("walks.toml");
+        std::fs::write(&path, "[amp.demo_weights]\nomomo = 0.0\n").unwrap();
+        let config = TrainConfig::from_toml_file(&path).unwrap();
+        assert_eq!(
+            config.amp.demo_weights,
+            lhm_sim::motion::SourceWeights {
+                deepmimic: 1.0,
+                omomo: 0.0
+            }
+        );
+        assert!(config.check().is_ok());
+        std::fs::write(&path, "[amp.demo_weights]\nomomo = 0.0\ndeepmimic = 0.0\n").unwrap();
+        let err = TrainConfig::from_toml_file(&path)
+            .unwrap()
+            .check()
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("amp.demo_weights"), "{err}");
+        std::fs::write(&path, "[amp.demo_weights]\ncarry = 1.0\n").unwrap();
+        let err = TrainConfig::from_toml_file(&path).unwrap_err().to_string();
+        assert!(err.contains("walks.toml") && err.contains("carry"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// A run directory made by another role is refused before anything in it changes.

@@ -50,6 +50,43 @@ impl Default for AmpWindow {
     }
 }
 
+/// How much of the discriminator's demo comes from each installed source, per second of clip:
+/// 1 and 1 (the default) samples every second of every clip alike, which gives the OMOMO box
+/// clips (13.9 s) about twice the DeepMimic walks' (7.4 s) share. A stage that only walks can
+/// leave the box clips out (`omomo = 0`), as AMP and TokenHSI give each skill its own motion set.
+/// Reference-state starts are not affected. Clips built with [`DemoMotion::from_clips`] count as
+/// DeepMimic's.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SourceWeights {
+    pub deepmimic: f64,
+    pub omomo: f64,
+}
+
+impl Default for SourceWeights {
+    fn default() -> Self {
+        Self {
+            deepmimic: 1.0,
+            omomo: 1.0,
+        }
+    }
+}
+
+impl SourceWeights {
+    /// Refuses a negative or non-finite weight, or both zero, naming the field.
+    pub fn check(&self) -> Result<(), String> {
+        for (name, w) in [("deepmimic", self.deepmimic), ("omomo", self.omomo)] {
+            if !(w.is_finite() && w >= 0.0) {
+                return Err(format!("{name} = {w}: a weight is finite and not negative"));
+            }
+        }
+        if self.deepmimic == 0.0 && self.omomo == 0.0 {
+            return Err("deepmimic and omomo are both 0: no demo to sample".into());
+        }
+        Ok(())
+    }
+}
+
 /// One retargeted clip: at least two poses, uniformly `frame_dt` apart (checked on construction).
 #[derive(Clone, Debug)]
 struct DemoClip {
@@ -58,6 +95,9 @@ struct DemoClip {
     frame_dt: f32,
     /// The clip carries an object (OMOMO): a start from it needs the object placed too.
     with_object: bool,
+    /// Relative weight of the clip's seconds in [`DemoMotion::sample_features`] (its source's
+    /// [`SourceWeights`] entry; 1 unless set).
+    weight: f64,
     /// The clip is one cycle of a periodic motion (DeepMimic `"Loop": "wrap"`): its last pose is
     /// its first moved along the ground, so it continues by repeating itself from there.
     looped: bool,
@@ -148,6 +188,7 @@ impl DemoMotion {
                 frame_dt,
                 with_object: false,
                 looped: false,
+                weight: 1.0,
             };
             // A little slack so a clip exactly as long as the window is not lost to rounding.
             if clip.duration_s() < window.span_s() * (1.0 - 1e-5) {
@@ -222,6 +263,27 @@ impl DemoMotion {
         self.window
     }
 
+    /// Weights [`Self::sample_features`]'s clips by source (OMOMO: the clips with an object).
+    /// Refuses weights [`SourceWeights::check`] refuses, and weights that leave none of the
+    /// loaded clips a chance (e.g. `deepmimic = 0` with only DeepMimic clips installed).
+    pub fn with_source_weights(mut self, weights: SourceWeights) -> Result<Self, MotionError> {
+        weights.check().map_err(MotionError::DemoWeights)?;
+        for c in &mut self.clips {
+            c.weight = if c.with_object {
+                weights.omomo
+            } else {
+                weights.deepmimic
+            };
+        }
+        if self.clips.iter().all(|c| c.weight == 0.0) {
+            return Err(MotionError::DemoWeights(format!(
+                "{weights:?} leaves none of the {} loaded clips",
+                self.clips.len()
+            )));
+        }
+        Ok(self)
+    }
+
     /// Width of one sampled row: `window.frames × amp_frame_dim(model)`, as `TaskEnv::amp_dim`.
     pub fn feature_dim(&self) -> usize {
         self.window.frames * amp_frame_dim(&self.model)
@@ -238,14 +300,20 @@ impl DemoMotion {
     /// uniform numbers in [0, 1); each row draws two, the clip then the start.
     pub fn sample_features(&self, n: usize, rng: &mut impl FnMut() -> f64) -> Vec<f32> {
         let mut out = Vec::with_capacity(n * self.feature_dim());
-        let total: f64 = self.clips.iter().map(|c| f64::from(c.duration_s())).sum();
+        let share = |c: &DemoClip| f64::from(c.duration_s()) * c.weight;
+        let total: f64 = self.clips.iter().map(share).sum();
         for _ in 0..n {
             let target = rng() * total;
             let mut acc = 0.0;
-            // Rounding may leave `target` past the last sum: fall back to the last clip.
-            let mut pick = self.clips.len() - 1;
+            // Rounding may leave `target` past the last sum: fall back to the last clip with a
+            // share.
+            let mut pick = self
+                .clips
+                .iter()
+                .rposition(|c| c.weight > 0.0)
+                .unwrap_or(self.clips.len() - 1);
             for (i, c) in self.clips.iter().enumerate() {
-                acc += f64::from(c.duration_s());
+                acc += share(c);
                 if target < acc {
                     pick = i;
                     break;
@@ -594,6 +662,61 @@ mod tests {
             let joint_vel = &f[vel_start..vel_start + m.dofs.len()];
             assert!(joint_vel.iter().all(|v| v.abs() < 1e-5), "{joint_vel:?}");
         }
+    }
+
+    #[test]
+    fn source_weights_set_each_sources_share_of_the_demo_windows() {
+        let m = CharacterModel::amp_humanoid();
+        let at = |h: f32| still(&m, Vector::new(0.0, 0.0, h), Rotation::IDENTITY);
+        // A 0.2-s walk (DeepMimic) at 0.9 m and a 0.6-s box clip (OMOMO) at 0.7 m.
+        let demo = || {
+            let mut d = DemoMotion::from_clips(
+                &m,
+                vec![
+                    ("walk".into(), vec![at(0.9); 7], DT),
+                    ("box".into(), vec![at(0.7); 19], DT),
+                ],
+                window(2),
+            )
+            .expect("valid");
+            d.clips[1].with_object = true;
+            d
+        };
+        let box_share = |d: &DemoMotion| {
+            let mut rng = SplitMix64::new(5);
+            let rows = d.sample_features(2000, &mut || rng.unit());
+            let dim = amp_frame_dim(&m);
+            let heights: Vec<f32> = rows.chunks(dim).map(|f| f[0]).collect();
+            assert!(heights
+                .iter()
+                .all(|h| (h - 0.9).abs() < 1e-5 || (h - 0.7).abs() < 1e-5));
+            heights.iter().filter(|h| (*h - 0.7).abs() < 1e-5).count() as f64 / heights.len() as f64
+        };
+        // Per second of clip by default: 0.6 / 0.8 of the windows from the box clip.
+        let default = box_share(&demo());
+        assert!((default - 0.75).abs() < 0.04, "{default}");
+        let weighted =
+            |deepmimic, omomo| demo().with_source_weights(SourceWeights { deepmimic, omomo });
+        assert_eq!(box_share(&weighted(1.0, 0.0).expect("walks only")), 0.0);
+        assert_eq!(box_share(&weighted(0.0, 2.0).expect("box only")), 1.0);
+        let even = box_share(&weighted(3.0, 1.0).expect("even"));
+        assert!((even - 0.5).abs() < 0.04, "{even}");
+        for (deepmimic, omomo) in [(0.0, 0.0), (-1.0, 1.0), (1.0, f64::NAN)] {
+            let err = weighted(deepmimic, omomo).expect_err("refused").to_string();
+            assert!(err.starts_with("[amp] demo_weights:"), "{err}");
+        }
+        // Weights that leave none of the loaded clips: only the walk, weighted out.
+        let walk_only =
+            DemoMotion::from_clips(&m, vec![("walk".into(), vec![at(0.9); 7], DT)], window(2))
+                .expect("valid");
+        let err = walk_only
+            .with_source_weights(SourceWeights {
+                deepmimic: 0.0,
+                omomo: 1.0,
+            })
+            .expect_err("nothing left")
+            .to_string();
+        assert!(err.contains("leaves none of the 1 loaded clips"), "{err}");
     }
 
     #[test]

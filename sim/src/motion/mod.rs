@@ -12,7 +12,7 @@ pub mod reach;
 pub mod retarget;
 pub mod smplh;
 
-pub use demo::{AmpWindow, DemoMotion};
+pub use demo::{AmpWindow, DemoMotion, SourceWeights};
 
 use std::path::PathBuf;
 
@@ -41,6 +41,8 @@ pub enum MotionError {
     },
     #[error("AMP window: {0}")]
     Window(String),
+    #[error("[amp] demo_weights: {0}")]
+    DemoWeights(String),
 }
 
 /// Where the clips live: `$LHM_MOTION_DIR`, else `~/.cache/lhm/motions`.

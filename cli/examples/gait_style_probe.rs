@@ -1,0 +1,175 @@
+//! Diagnostic: where a `[env.gait]` run's discriminator tells the policy from the clips. Plays the
+//! run's checkpoint with mean actions on unseen tasks (from rest and walking, as `lhm eval` starts
+//! them), splits the agent's AMP windows into "walking" (the base runs the cycle), "stopped" (the
+//! base stands after its stop) and "falling" (the last 15 steps before a fall), and prints the
+//! discriminator's style reward and accuracy on each and on demo windows, and the features whose
+//! means differ most from the clips' (in the clips' standard deviations).
+//! `cargo run --release -p lhm-cli --example gait_style_probe -- RUN_DIR [TASKS] [SEEDS]`
+use lhm_actor::eval::{gait_stopped, EvalSetup, GaitStart};
+use lhm_learner::service::TrainConfig;
+use lhm_learner::Learner;
+use lhm_nets::SplitMix64;
+use lhm_scenes::{Benchmark, Split};
+use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::obs::amp_frame_dim;
+use lhm_sim::CharacterModel;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+const FALL_TAIL: usize = 15;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let dir = PathBuf::from(
+        args.next()
+            .ok_or("usage: gait_style_probe RUN_DIR [TASKS] [SEEDS]")?,
+    );
+    let tasks: usize = args.next().map_or(Ok(8), |s| s.parse())?;
+    let seeds: u64 = args.next().map_or(Ok(4), |s| s.parse())?;
+    let config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
+    let learner = Learner::load(&dir.join("checkpoint"), None)?;
+    let amp = learner
+        .amp
+        .as_ref()
+        .ok_or("no discriminator in this checkpoint (AMP off)")?;
+    let gait = config
+        .env
+        .gait
+        .as_ref()
+        .ok_or("the run has no [env.gait]")?;
+    let model = CharacterModel::amp_humanoid();
+    let bench = Benchmark::embedded()?;
+    let demo = DemoMotion::load_dir(
+        &model,
+        &lhm_sim::motion::default_dir(),
+        AmpWindow::of(&config.env, &config.sim),
+    )?
+    .with_source_weights(config.amp.demo_weights)?;
+    let reference = Arc::new(lhm_sim::gait::reference_for(
+        &model,
+        &demo,
+        &gait.clip,
+        1.0 / config.sim.control_hz,
+    )?);
+    let unseen: Vec<_> = bench
+        .tasks(Split::Unseen)
+        .iter()
+        .take(tasks)
+        .cloned()
+        .collect();
+    // [walking, stopped, falling] windows.
+    let mut groups: [Vec<f32>; 3] = Default::default();
+    for rest in [true, false] {
+        let setup = EvalSetup {
+            model: &model,
+            catalogue: &bench.catalogue,
+            sim: &config.sim,
+            env: &config.env,
+            batch: 1,
+            language: false,
+            gait: Some(GaitStart {
+                demo: &demo,
+                reference: Arc::clone(&reference),
+                rest,
+            }),
+            max_steps: Some(300),
+            action_std: 0.0,
+        };
+        for task in &unseen {
+            for seed in 0..seeds {
+                let mut env = setup.env_for(task, seed);
+                let mut episode: Vec<(bool, Vec<f32>)> = Vec::new();
+                let fell = loop {
+                    let a = learner.actor_critic.act_deterministic(&env.observation())?;
+                    let r = env.step(&a);
+                    episode.push((gait_stopped(&env), env.amp_features()));
+                    if r.done || r.truncated || r.physics_invalid {
+                        break r.fell;
+                    }
+                };
+                let tail = if fell {
+                    episode.len().saturating_sub(FALL_TAIL)
+                } else {
+                    episode.len()
+                };
+                for (k, (stopped, f)) in episode.into_iter().enumerate() {
+                    let g = if k >= tail { 2 } else { usize::from(stopped) };
+                    groups[g].extend(f);
+                }
+            }
+        }
+    }
+    let width = amp.feature_dim();
+    let mut split = SplitMix64::new(7);
+    let mut rng = || split.next_f64();
+    let demo_rows = demo.sample_features(4096, &mut rng);
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len().max(1) as f32;
+    let report = |name: &str, rows: &[f32]| -> Result<(), Box<dyn std::error::Error>> {
+        if rows.is_empty() {
+            println!("{name:>8}: no windows");
+            return Ok(());
+        }
+        let style = amp.style_rewards(rows)?;
+        let logits = amp.logits(rows)?;
+        let real = logits.iter().filter(|&&d| d > 0.0).count() as f32 / logits.len() as f32;
+        println!(
+            "{name:>8}: {:6} windows, style {:.3}, judged demo {:.3}",
+            rows.len() / width,
+            mean(&style),
+            real
+        );
+        Ok(())
+    };
+    report("demo", &demo_rows)?;
+    for (name, rows) in ["walking", "stopped", "falling"].iter().zip(&groups) {
+        report(name, rows)?;
+    }
+    // Which features the stand differs on, in the clips' standard deviations.
+    let frame = amp_frame_dim(&model);
+    let stats = |rows: &[f32]| -> (Vec<f64>, Vec<f64>) {
+        let n = (rows.len() / width).max(1) as f64;
+        let mut m = vec![0.0f64; width];
+        let mut s = vec![0.0f64; width];
+        for row in rows.chunks_exact(width) {
+            for (i, &x) in row.iter().enumerate() {
+                m[i] += f64::from(x) / n;
+            }
+        }
+        for row in rows.chunks_exact(width) {
+            for (i, &x) in row.iter().enumerate() {
+                s[i] += (f64::from(x) - m[i]).powi(2) / n;
+            }
+        }
+        (m, s.into_iter().map(|v| v.sqrt().max(1e-3)).collect())
+    };
+    let (dm, ds) = stats(&demo_rows);
+    let label = |i: usize| -> String {
+        let (w, j) = (i / frame, i % frame);
+        let rotations = frame - 13 - model.dofs.len() - 12;
+        let what = match j {
+            0 => "root height".to_string(),
+            1..=6 => format!("root rot6 {}", j - 1),
+            7..=9 => format!("root linvel {}", j - 7),
+            10..=12 => format!("root angvel {}", j - 10),
+            _ if j < 13 + rotations => format!("joint rotation {}", j - 13),
+            _ if j < 13 + rotations + model.dofs.len() => {
+                model.dofs[j - 13 - rotations].name.clone() + " velocity"
+            }
+            _ => format!("key body {}", j - 13 - rotations - model.dofs.len()),
+        };
+        format!("frame {w} {what}")
+    };
+    for (name, rows) in ["walking", "stopped"].iter().zip(&groups) {
+        if rows.is_empty() {
+            continue;
+        }
+        let (am, _) = stats(rows);
+        let mut z: Vec<(usize, f64)> = (0..width).map(|i| (i, (am[i] - dm[i]) / ds[i])).collect();
+        z.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+        println!("{name}: features furthest from the clips' mean (z = (agent - demo) / demo std)");
+        for (i, zi) in z.iter().take(8) {
+            println!("  {:>6.2}  {}", zi, label(*i));
+        }
+    }
+    Ok(())
+}
