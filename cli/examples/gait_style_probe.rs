@@ -10,6 +10,7 @@ use lhm_learner::service::TrainConfig;
 use lhm_learner::Learner;
 use lhm_nets::SplitMix64;
 use lhm_scenes::{Benchmark, Split};
+use lhm_sim::mjcf::JointKind;
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::obs::amp_frame_dim;
 use lhm_sim::CharacterModel;
@@ -143,19 +144,38 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (m, s.into_iter().map(|v| v.sqrt().max(1e-3)).collect())
     };
     let (dm, ds) = stats(&demo_rows);
+    // The joint-rotation block's entries by body, in the AMP frame's order.
+    let mut rotation_names = Vec::new();
+    for b in &model.bodies {
+        match b.joint {
+            JointKind::Ball { .. } => {
+                rotation_names.extend((0..6).map(|k| format!("{} rot6 {k}", b.name)))
+            }
+            JointKind::Hinge { .. } => rotation_names.push(format!("{} angle", b.name)),
+            JointKind::Free | JointKind::Fixed => {}
+        }
+    }
+    let keys = ["right hand", "left hand", "right foot", "left foot"];
     let label = |i: usize| -> String {
         let (w, j) = (i / frame, i % frame);
-        let rotations = frame - 13 - model.dofs.len() - 12;
+        let rotations = rotation_names.len();
         let what = match j {
             0 => "root height".to_string(),
             1..=6 => format!("root rot6 {}", j - 1),
             7..=9 => format!("root linvel {}", j - 7),
             10..=12 => format!("root angvel {}", j - 10),
-            _ if j < 13 + rotations => format!("joint rotation {}", j - 13),
+            _ if j < 13 + rotations => rotation_names[j - 13].clone(),
             _ if j < 13 + rotations + model.dofs.len() => {
                 model.dofs[j - 13 - rotations].name.clone() + " velocity"
             }
-            _ => format!("key body {}", j - 13 - rotations - model.dofs.len()),
+            _ => {
+                let k = j - 13 - rotations - model.dofs.len();
+                format!(
+                    "{} {}",
+                    keys.get(k / 3).unwrap_or(&"key body"),
+                    ["x", "y", "z"][k % 3]
+                )
+            }
         };
         format!("frame {w} {what}")
     };
