@@ -160,6 +160,12 @@ impl EvalSetup<'_> {
         let config = EnvConfig {
             max_episode_steps: self.max_steps.map_or(cycles_limit, |m| m.min(cycles_limit)),
             demo_start_probability: 0.0,
+            // The stand after the stop is played to the time limit: a training episode's
+            // early end is no part of the task.
+            gait: self.env.gait.clone().map(|g| lhm_sim::env::GaitConfig {
+                stand_seconds: 0.0,
+                ..g
+            }),
             ..self.env.clone()
         };
         let mut env = TaskEnv::new(self.model, &task, self.catalogue, self.sim.clone(), config);

@@ -365,11 +365,19 @@ pub(crate) fn train_config_for(
     }
 }
 
-/// `train` without the upright assist: a trained policy is judged, and shown, on its own.
+/// `train` without the upright assist and without `[env.gait] stand_seconds`' early end: a
+/// trained policy is judged, and shown, on its own and to the time limit.
 pub(crate) fn without_training_aids(mut train: TrainConfig) -> TrainConfig {
     if train.sim.assist.is_active() {
         tracing::info!("the run trained with sim.assist; playing without it");
         train.sim.assist = Default::default();
+    }
+    if let Some(g) = train.env.gait.as_mut().filter(|g| g.stand_seconds > 0.0) {
+        tracing::info!(
+            "the run's episodes ended {} s after the stop; playing on",
+            g.stand_seconds
+        );
+        g.stand_seconds = 0.0;
     }
     train
 }

@@ -156,6 +156,12 @@ pub struct GaitConfig {
     /// the stand gets the dense shaping toward upright, still and feet under the body that the
     /// walk's tracking gives the walk. Off: only `alive` and the task terms pay for standing.
     pub stand_imitation: bool,
+    /// > 0: a training episode ends this long (s) after the base's stop, truncated (the learner
+    /// bootstraps its value), instead of standing on to `max_episode_steps`: in the method the
+    /// cycle goes on from the reach to the lift, and a stand of the rest of a 10-s episode is
+    /// ~75 % of the agent's AMP windows, which no walking clip looks like (`gait_style_probe`).
+    /// 0 (default): no such end. `lhm eval` and `render-rollout` play the whole time limit.
+    pub stand_seconds: f32,
     /// Starts this far (m, horizontally) before the first object, heading at it, instead of at
     /// the task's start: episodes about the stop alone. 0: the task's start.
     pub start_distance: f32,
@@ -209,6 +215,7 @@ impl Default for GaitConfig {
             stop_distance: 0.0,
             stop_on: StopOn::Distance,
             stand_imitation: false,
+            stand_seconds: 0.0,
             start_distance: 0.0,
             near_start_fraction: 1.0,
             start_distance_max: 0.0,
@@ -254,6 +261,13 @@ pub fn stop_now(
             StopOn::Footfall => footfall,
             StopOn::FeetDown => feet_down,
         }
+}
+
+/// Whether a gait episode's stand is over: `stand_seconds` > 0 and the base stopped (at step
+/// `stopped_at`) at least that long before step `steps`, at `hz` control steps a second.
+pub fn stand_over(stopped_at: Option<u32>, steps: u32, stand_seconds: f32, hz: f32) -> bool {
+    stand_seconds > 0.0
+        && stopped_at.is_some_and(|at| steps.saturating_sub(at) as f32 >= stand_seconds * hz)
 }
 
 /// The gait an episode runs: its cycle and where in it the next step is.
@@ -820,6 +834,19 @@ impl TaskEnv {
         self.gait.is_some()
     }
 
+    /// [`stand_over`] for this episode's gait and `[env.gait] stand_seconds`.
+    fn stand_is_over(&self) -> bool {
+        let (Some(run), Some(config)) = (&self.gait, &self.config.gait) else {
+            return false;
+        };
+        stand_over(
+            run.stopped.then_some(run.stopped_at),
+            self.steps,
+            config.stand_seconds,
+            self.world.config.control_hz,
+        )
+    }
+
     /// The gait's phase in its cycle, [0, 1), while one runs and walks.
     pub fn gait_phase(&self) -> Option<f32> {
         self.gait
@@ -1153,7 +1180,8 @@ impl TaskEnv {
             reward,
             terms,
             done,
-            truncated: !done && self.steps >= self.config.max_episode_steps,
+            truncated: !done
+                && (self.steps >= self.config.max_episode_steps || self.stand_is_over()),
             fell,
             physics_invalid: false,
             handoff,

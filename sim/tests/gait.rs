@@ -4,7 +4,7 @@
 
 use lhm_scenes::{Benchmark, Support};
 use lhm_sim::env::{
-    empty_room, stop_now, without_furniture, EnvConfig, GaitConfig, StopOn, TaskEnv,
+    empty_room, stand_over, stop_now, without_furniture, EnvConfig, GaitConfig, StopOn, TaskEnv,
 };
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
@@ -484,6 +484,57 @@ fn with_stop_on_footfall_the_base_walks_on_to_the_references_next_footfall() {
         None,
         "stopped at the footfall (step {first})"
     );
+}
+
+#[test]
+fn a_stand_is_over_stand_seconds_after_the_stop_and_never_when_off() {
+    for (stopped_at, steps, seconds, over) in [
+        (None, 500, 0.5, false),
+        (Some(10), 24, 0.5, false),
+        (Some(10), 25, 0.5, true),
+        (Some(10), 400, 0.0, false),
+        (Some(0), 0, 0.0, false),
+    ] {
+        assert_eq!(
+            stand_over(stopped_at, steps, seconds, 30.0),
+            over,
+            "{stopped_at:?} {steps} {seconds}"
+        );
+    }
+}
+
+#[test]
+fn with_stand_seconds_the_episode_is_truncated_that_long_after_the_stop() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    // Started at rest within the stop distance: the base stops on the first step.
+    let end = |stand_seconds: f32| {
+        let gait = GaitConfig {
+            stop_distance: 100.0,
+            stand_seconds,
+            ..GaitConfig::default()
+        };
+        let mut env = task_env(
+            &model,
+            EnvConfig {
+                gait: Some(gait),
+                max_episode_steps: 40,
+                ..EnvConfig::default()
+            },
+        );
+        let yaw = env.yaw_toward_first_object();
+        assert!(env.start_at_rest_in_gait(Arc::clone(&reference), 0, yaw));
+        let zero = vec![0.0; model.dofs.len()];
+        (1..=40)
+            .map(|k| (k, env.step(&zero)))
+            .find(|(_, r)| r.done || r.truncated)
+            .map(|(k, r)| (k, r.done, r.truncated))
+    };
+    // The base stops as the first step begins (step count 0): half a second at 30 Hz later is
+    // the end of the 15th step.
+    assert_eq!(end(0.5), Some((15, false, true)));
+    assert_eq!(end(0.0), Some((40, false, true)), "off: the time limit");
 }
 
 #[test]
