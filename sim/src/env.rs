@@ -156,7 +156,7 @@ pub struct GaitConfig {
     /// the stand gets the dense shaping toward upright, still and feet under the body that the
     /// walk's tracking gives the walk. Off: only `alive` and the task terms pay for standing.
     pub stand_imitation: bool,
-    /// > 0: a training episode ends this long (s) after the base's stop, truncated (the learner
+    /// Above 0: a training episode ends this long (s) after the base's stop, truncated (the learner
     /// bootstraps its value), instead of standing on to `max_episode_steps`: in the method the
     /// cycle goes on from the reach to the lift, and a stand of the rest of a 10-s episode is
     /// ~75 % of the agent's AMP windows, which no walking clip looks like (`gait_style_probe`).
