@@ -4,7 +4,8 @@
 //! base stands after its stop) and "falling" (the last 15 steps before a fall), and prints the
 //! discriminator's style reward and accuracy on each and on demo windows, and the features whose
 //! means differ most from the clips' (in the clips' standard deviations).
-//! `cargo run --release -p lhm-cli --example gait_style_probe -- RUN_DIR [TASKS] [SEEDS]`
+//! `cargo run --release -p lhm-cli --example gait_style_probe -- RUN_DIR [TASKS] [SEEDS] [zero]`
+//! (`zero`: the gait base alone acts, zero residuals, judged by the run's discriminator).
 use lhm_actor::eval::{gait_stopped, EvalSetup, GaitStart};
 use lhm_learner::service::TrainConfig;
 use lhm_learner::Learner;
@@ -23,10 +24,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let dir = PathBuf::from(
         args.next()
-            .ok_or("usage: gait_style_probe RUN_DIR [TASKS] [SEEDS]")?,
+            .ok_or("usage: gait_style_probe RUN_DIR [TASKS] [SEEDS] [zero]")?,
     );
     let tasks: usize = args.next().map_or(Ok(8), |s| s.parse())?;
     let seeds: u64 = args.next().map_or(Ok(4), |s| s.parse())?;
+    let zero = match args.next().as_deref() {
+        None => false,
+        Some("zero") => true,
+        Some(other) => {
+            return Err(format!("{other:?}: the fourth argument is `zero` or nothing").into())
+        }
+    };
     let config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
     let learner = Learner::load(&dir.join("checkpoint"), None)?;
     let amp = learner
@@ -81,7 +89,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let mut env = setup.env_for(task, seed);
                 let mut episode: Vec<(bool, Vec<f32>)> = Vec::new();
                 let fell = loop {
-                    let a = learner.actor_critic.act_deterministic(&env.observation())?;
+                    let a = if zero {
+                        vec![0.0; learner.actor_critic.act_dim()]
+                    } else {
+                        learner.actor_critic.act_deterministic(&env.observation())?
+                    };
                     let r = env.step(&a);
                     episode.push((gait_stopped(&env), env.amp_features()));
                     if r.done || r.truncated || r.physics_invalid {
