@@ -160,12 +160,11 @@ impl EvalSetup<'_> {
         let config = EnvConfig {
             max_episode_steps: self.max_steps.map_or(cycles_limit, |m| m.min(cycles_limit)),
             demo_start_probability: 0.0,
-            // The stand after the stop is played to the time limit: a training episode's
-            // early end is no part of the task.
-            gait: self.env.gait.clone().map(|g| lhm_sim::env::GaitConfig {
-                stand_seconds: 0.0,
-                ..g
-            }),
+            gait: self
+                .env
+                .gait
+                .clone()
+                .map(lhm_sim::env::GaitConfig::played_to_the_limit),
             ..self.env.clone()
         };
         let mut env = TaskEnv::new(self.model, &task, self.catalogue, self.sim.clone(), config);
@@ -217,7 +216,7 @@ impl<'a> EvalPolicy<'a> {
     /// Which of [`Self::policies`] acts in `env` now.
     pub fn index_for(&self, env: &TaskEnv) -> usize {
         match self {
-            EvalPolicy::Joined { .. } => usize::from(gait_stopped(env)),
+            EvalPolicy::Joined { .. } => usize::from(env.gait_stopped()),
             _ => self.index_for_cycle(env.cycles.current),
         }
     }
@@ -230,11 +229,6 @@ impl<'a> EvalPolicy<'a> {
             EvalPolicy::Joined { .. } => 0,
         }
     }
-}
-
-/// Whether `env` runs a gait whose base has stopped (it runs and no longer has a phase).
-pub fn gait_stopped(env: &TaskEnv) -> bool {
-    env.gait_running() && env.gait_phase().is_none()
 }
 
 impl<'a> From<&'a ActorCritic> for EvalPolicy<'a> {
@@ -738,10 +732,10 @@ mod tests {
         assert_eq!(run(joined, &never), run(EvalPolicy::One(&a), &never));
         // One that stops at once: the stopping policy from the first step after the stop on.
         let mut env = setup(&at_once).env_for(&jobs[0].0, 0);
-        assert!(!gait_stopped(&env), "walking until its first step");
+        assert!(!env.gait_stopped(), "walking until its first step");
         assert_eq!(joined.index_for(&env), 0);
         env.step(&vec![0.0; model.dofs.len()]);
-        assert!(gait_stopped(&env));
+        assert!(env.gait_stopped());
         assert_eq!(joined.index_for(&env), 1);
         // The same net on both sides scores exactly as that net alone.
         let same = EvalPolicy::Joined { walk: &b, stop: &b };

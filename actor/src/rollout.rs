@@ -179,6 +179,7 @@ struct ChunkBuf {
     truncated: Vec<bool>,
     truncation_values: Vec<f32>,
     amp_features: Vec<f32>,
+    gait_stopped: Vec<bool>,
     episodes: Vec<EpisodeStats>,
     poisoned: bool,
 }
@@ -682,6 +683,7 @@ impl Rollout {
                 let features = slot.env.amp_features();
                 buf.amp_features.extend_from_slice(&features);
             }
+            buf.gait_stopped.push(slot.env.gait_stopped());
             if result.physics_invalid {
                 buf.poisoned = true;
             }
@@ -799,6 +801,12 @@ impl Rollout {
                 truncated: buf.truncated,
                 truncation_values: buf.truncation_values,
                 amp_features: buf.amp_features,
+                // Sent only where it says something: most chunks have no stopped step.
+                gait_stopped: if buf.gait_stopped.contains(&true) {
+                    buf.gait_stopped
+                } else {
+                    Vec::new()
+                },
                 bootstrap_value: bootstrap[i],
                 episodes: buf.episodes,
                 ..TrajectoryChunk::versioned()

@@ -51,6 +51,7 @@ fn chunks_are_whole_versioned_and_valid() {
             !cut.is_empty(),
             "an episode ends inside every 12-step chunk"
         );
+        assert!(c.gait_stopped.is_empty(), "no gait, no stop flags");
         for e in &c.episodes {
             assert!(e.task_id == "train-0001.p1" || e.task_id == "train-0002.p2");
             assert_eq!(e.final_placement_error_m.len() as u32, e.cycles_attempted);

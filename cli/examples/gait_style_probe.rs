@@ -4,9 +4,11 @@
 //! base stands after its stop) and "falling" (the last 15 steps before a fall), and prints the
 //! discriminator's style reward and accuracy on each and on demo windows, and the features whose
 //! means differ most from the clips' (in the clips' standard deviations).
-//! `cargo run --release -p lhm-cli --example gait_style_probe -- RUN_DIR [TASKS] [SEEDS] [zero]`
-//! (`zero`: the gait base alone acts, zero residuals, judged by the run's discriminator).
-use lhm_actor::eval::{gait_stopped, EvalSetup, GaitStart};
+//! `cargo run --release -p lhm-cli --example gait_style_probe -- RUN_DIR [TASKS] [SEEDS] [zero |
+//! scale=JOINT:K]` (`zero`: the gait base alone acts, zero residuals, judged by the run's
+//! discriminator; `scale=abdomen:0`: the residual on the joints whose name contains `abdomen` times 0).
+//! Also prints how many episodes fell.
+use lhm_actor::eval::{EvalSetup, GaitStart};
 use lhm_learner::service::TrainConfig;
 use lhm_learner::Learner;
 use lhm_nets::SplitMix64;
@@ -24,15 +26,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let dir = PathBuf::from(
         args.next()
-            .ok_or("usage: gait_style_probe RUN_DIR [TASKS] [SEEDS] [zero]")?,
+            .ok_or("usage: gait_style_probe RUN_DIR [TASKS] [SEEDS] [zero | scale=JOINT:K]")?,
     );
     let tasks: usize = args.next().map_or(Ok(8), |s| s.parse())?;
     let seeds: u64 = args.next().map_or(Ok(4), |s| s.parse())?;
-    let zero = match args.next().as_deref() {
-        None => false,
-        Some("zero") => true,
-        Some(other) => {
-            return Err(format!("{other:?}: the fourth argument is `zero` or nothing").into())
+    // The policy's residual on the joints whose name contains `scaled.0` is multiplied by
+    // `scaled.1` (`zero`: every joint by 0, the gait base alone).
+    let scaled: Option<(String, f32)> = match args.next().as_deref() {
+        None => None,
+        Some("zero") => Some((String::new(), 0.0)),
+        Some(arg) => {
+            let bad = || format!("{arg:?}: the fourth argument is `zero` or `scale=JOINT:K`");
+            let (joint, k) = arg
+                .strip_prefix("scale=")
+                .and_then(|s| s.split_once(':'))
+                .ok_or_else(bad)?;
+            Some((joint.to_string(), k.parse().map_err(|_| bad())?))
         }
     };
     let config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
@@ -47,6 +56,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .as_ref()
         .ok_or("the run has no [env.gait]")?;
     let model = CharacterModel::amp_humanoid();
+    if let Some((joint, _)) = &scaled {
+        if !model.dofs.iter().any(|d| d.name.contains(joint.as_str())) {
+            let names: Vec<&str> = model.dofs.iter().map(|d| d.name.as_str()).collect();
+            return Err(format!("scale={joint}: no joint's name contains it ({names:?})").into());
+        }
+    }
     let bench = Benchmark::embedded()?;
     let demo = DemoMotion::load_dir(
         &model,
@@ -68,6 +83,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect();
     // [walking, stopped, falling] windows.
     let mut groups: [Vec<f32>; 3] = Default::default();
+    let (mut episodes, mut falls) = (0usize, 0usize);
     for rest in [true, false] {
         let setup = EvalSetup {
             model: &model,
@@ -89,17 +105,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let mut env = setup.env_for(task, seed);
                 let mut episode: Vec<(bool, Vec<f32>)> = Vec::new();
                 let fell = loop {
-                    let a = if zero {
-                        vec![0.0; learner.actor_critic.act_dim()]
-                    } else {
-                        learner.actor_critic.act_deterministic(&env.observation())?
-                    };
+                    let mut a = learner.actor_critic.act_deterministic(&env.observation())?;
+                    if let Some((joint, k)) = &scaled {
+                        for (x, dof) in a.iter_mut().zip(&model.dofs) {
+                            if dof.name.contains(joint.as_str()) {
+                                *x *= k;
+                            }
+                        }
+                    }
                     let r = env.step(&a);
-                    episode.push((gait_stopped(&env), env.amp_features()));
+                    episode.push((env.gait_stopped(), env.amp_features()));
                     if r.done || r.truncated || r.physics_invalid {
                         break r.fell;
                     }
                 };
+                episodes += 1;
+                falls += usize::from(fell);
                 let tail = if fell {
                     episode.len().saturating_sub(FALL_TAIL)
                 } else {
@@ -133,6 +154,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         Ok(())
     };
+    println!("{falls} of {episodes} episodes fell");
     report("demo", &demo_rows)?;
     for (name, rows) in ["walking", "stopped", "falling"].iter().zip(&groups) {
         report(name, rows)?;

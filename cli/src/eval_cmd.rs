@@ -356,9 +356,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                     // stopping policy once the base has stopped.
                     let ac = match (&teacher1, &stopper) {
                         (Some(t1), _) if env.cycles.current == 0 => &t1.actor_critic,
-                        (None, Some(stop)) if lhm_actor::eval::gait_stopped(env) => {
-                            &stop.actor_critic
-                        }
+                        (None, Some(stop)) if env.gait_stopped() => &stop.actor_critic,
                         _ => &actor_critic,
                     };
                     Ok(

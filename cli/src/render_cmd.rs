@@ -372,13 +372,16 @@ pub(crate) fn without_training_aids(mut train: TrainConfig) -> TrainConfig {
         tracing::info!("the run trained with sim.assist; playing without it");
         train.sim.assist = Default::default();
     }
-    if let Some(g) = train.env.gait.as_mut().filter(|g| g.stand_seconds > 0.0) {
+    if let Some(g) = train.env.gait.as_ref().filter(|g| g.stand_seconds > 0.0) {
         tracing::info!(
             "the run's episodes ended {} s after the stop; playing on",
             g.stand_seconds
         );
-        g.stand_seconds = 0.0;
     }
+    train.env.gait = train
+        .env
+        .gait
+        .map(lhm_sim::env::GaitConfig::played_to_the_limit);
     train
 }
 

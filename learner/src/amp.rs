@@ -43,6 +43,11 @@ pub struct AmpConfig {
     /// How much of the demo each clip source gives, per second of clip (`{ deepmimic = 1,
     /// omomo = 0 }`: the walks only). Default 1 and 1.
     pub demo_weights: lhm_sim::motion::SourceWeights,
+    /// Whether the steps after the gait base's stop go to the discriminator. `false`: they stay
+    /// out of its agent batch (and its accuracy), and each is paid the batch's mean style reward
+    /// of the judged steps — for demo sets with no standing clip, where a stand is told apart
+    /// from every demo window however well it is done. Default true (every step judged).
+    pub discriminate_stand: bool,
 }
 
 impl Default for AmpConfig {
@@ -70,6 +75,7 @@ impl Default for AmpConfig {
             seed: 0,
             style_cap_floor: None,
             demo_weights: lhm_sim::motion::SourceWeights::default(),
+            discriminate_stand: true,
         }
     }
 }

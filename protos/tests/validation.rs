@@ -131,6 +131,16 @@ fn chunk_shape_mismatches_are_rejected() {
     let mut m = c();
     m.truncation_values.pop();
     assert_invalid(m, "truncation_values");
+    let mut m = c();
+    m.gait_stopped.pop();
+    assert_invalid(m, "gait_stopped");
+    // No gait: no flags at all is valid.
+    let m = TrajectoryChunk {
+        gait_stopped: vec![],
+        ..c()
+    };
+    let decoded = TrajectoryChunk::decode_checked(&m.encode_to_vec());
+    assert!(decoded.is_ok(), "{decoded:?}");
     // Dimensions that disagree with the data.
     assert_invalid(
         TrajectoryChunk {

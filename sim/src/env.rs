@@ -231,6 +231,18 @@ impl Default for GaitConfig {
     }
 }
 
+impl GaitConfig {
+    /// This gait as a trained policy is judged and shown (`lhm eval`, `render-rollout`): no
+    /// `stand_seconds` early end, the stand played to the time limit — a training episode's early
+    /// end is no part of the task.
+    pub fn played_to_the_limit(self) -> Self {
+        Self {
+            stand_seconds: 0.0,
+            ..self
+        }
+    }
+}
+
 /// `[env.gait] stop_on`: when the base stops once within `stop_distance` of the object.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -827,6 +839,12 @@ impl TaskEnv {
         } else {
             run.reference.at(run.step).1.to_vec()
         })
+    }
+
+    /// Whether this episode's gait has stopped (the character stands from then on); false
+    /// without a gait.
+    pub fn gait_stopped(&self) -> bool {
+        self.gait.as_ref().is_some_and(|g| g.stopped)
     }
 
     /// Whether a gait runs this episode (walking or stopped).

@@ -503,28 +503,60 @@ fn a_stand_is_over_stand_seconds_after_the_stop_and_never_when_off() {
     }
 }
 
+/// An environment started at rest in the gait within its stop distance (100 m): the base stops
+/// on the first step. `gait` and `config` set the rest.
+fn stopped_at_rest(model: &CharacterModel, gait: GaitConfig, config: EnvConfig) -> TaskEnv {
+    let demo = cycle_demo(model);
+    let reference = Arc::new(GaitReference::new(model, &demo, 0, 1.0 / 30.0).unwrap());
+    let gait = GaitConfig {
+        stop_distance: 100.0,
+        ..gait
+    };
+    let mut env = task_env(
+        model,
+        EnvConfig {
+            gait: Some(gait),
+            ..config
+        },
+    );
+    let yaw = env.yaw_toward_first_object();
+    assert!(env.start_at_rest_in_gait(reference, 0, yaw));
+    env
+}
+
+#[test]
+fn the_env_says_when_its_gait_has_stopped() {
+    let model = CharacterModel::amp_humanoid();
+    let zero = vec![0.0; model.dofs.len()];
+    let mut env = stopped_at_rest(&model, GaitConfig::default(), EnvConfig::default());
+    env.step(&zero);
+    assert!(env.gait_stopped());
+    // Started walking with no stop distance: the base walks on.
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let mut walking = gait_env(&model, Some(GaitConfig::default()));
+    let yaw = walking.yaw_toward_first_object();
+    assert!(walking.start_in_gait(&demo, reference, 9, yaw));
+    walking.step(&zero);
+    assert!(walking.gait_running() && !walking.gait_stopped());
+    let mut no_gait = gait_env(&model, None);
+    no_gait.step(&zero);
+    assert!(!no_gait.gait_stopped());
+}
+
 #[test]
 fn with_stand_seconds_the_episode_is_truncated_that_long_after_the_stop() {
     let model = CharacterModel::amp_humanoid();
-    let demo = cycle_demo(&model);
-    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
-    // Started at rest within the stop distance: the base stops on the first step.
     let end = |stand_seconds: f32| {
         let gait = GaitConfig {
-            stop_distance: 100.0,
             stand_seconds,
             ..GaitConfig::default()
         };
-        let mut env = task_env(
-            &model,
-            EnvConfig {
-                gait: Some(gait),
-                max_episode_steps: 40,
-                ..EnvConfig::default()
-            },
-        );
-        let yaw = env.yaw_toward_first_object();
-        assert!(env.start_at_rest_in_gait(Arc::clone(&reference), 0, yaw));
+        let config = EnvConfig {
+            max_episode_steps: 40,
+            ..EnvConfig::default()
+        };
+        let mut env = stopped_at_rest(&model, gait, config);
         let zero = vec![0.0; model.dofs.len()];
         (1..=40)
             .map(|k| (k, env.step(&zero)))
@@ -540,23 +572,15 @@ fn with_stand_seconds_the_episode_is_truncated_that_long_after_the_stop() {
 #[test]
 fn with_stand_imitation_the_stop_tracks_the_standing_pose() {
     let model = CharacterModel::amp_humanoid();
-    let demo = cycle_demo(&model);
-    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
     // Started at rest (the standing pose) and stopped at once: the first steps' imitation term.
     let terms = |stand_imitation: bool, action: f32| {
         let gait = GaitConfig {
-            stop_distance: 100.0,
             stand_imitation,
             ..GaitConfig::default()
         };
-        let mut config = EnvConfig {
-            gait: Some(gait),
-            ..EnvConfig::default()
-        };
+        let mut config = EnvConfig::default();
         config.weights.imitation = 1.0;
-        let mut env = task_env(&model, config);
-        let yaw = env.yaw_toward_first_object();
-        assert!(env.start_at_rest_in_gait(Arc::clone(&reference), 0, yaw));
+        let mut env = stopped_at_rest(&model, gait, config);
         let action: Vec<f32> = (0..model.dofs.len())
             .map(|i| if i % 2 == 0 { action } else { -action })
             .collect();

@@ -26,6 +26,7 @@ pub struct EpisodeSummary {
     /// Falls among the episodes from task starts (demo starts mid-stride fall more often).
     pub task_start_falls: u64,
     pub mean_task_reward: f64,
+    /// Mean style reward per step the discriminator judged (see `[amp] discriminate_stand`).
     pub mean_style_reward: f64,
     /// Per task-reward term, its weighted mean per step over the finished episodes.
     pub reward_terms: std::collections::BTreeMap<String, f64>,
@@ -108,6 +109,53 @@ pub fn episode_summary(chunks: &[TrajectoryChunk]) -> EpisodeSummary {
     summary
 }
 
+/// Whether step `t` of `chunk` goes to the discriminator: every step, unless `skip_stand` and
+/// the gait had stopped by then (`[amp] discriminate_stand = false`).
+fn judged(chunk: &TrajectoryChunk, t: usize, skip_stand: bool) -> bool {
+    !(skip_stand && chunk.gait_stopped.get(t).copied().unwrap_or(false))
+}
+
+/// Each chunk's style reward per step (`None` for chunks without AMP features), with the steps
+/// the discriminator does not judge paid the mean style of those it does, so leaving a stand out
+/// makes it neither cheaper nor dearer than walking. Also the sum and count of judged steps.
+fn chunk_styles(
+    chunks: &[TrajectoryChunk],
+    amp: &AmpTrainer,
+) -> LearnerResult<(Vec<Option<Vec<f32>>>, f64, u64)> {
+    let skip_stand = !amp.config.discriminate_stand;
+    let mut styles = Vec::with_capacity(chunks.len());
+    let (mut sum, mut count) = (0f64, 0u64);
+    for c in chunks {
+        if c.amp_dim == 0 {
+            styles.push(None);
+            continue;
+        }
+        let style = amp.style_rewards(&c.amp_features)?;
+        for (t, &x) in style.iter().enumerate() {
+            if judged(c, t, skip_stand) {
+                sum += x as f64;
+                count += 1;
+            }
+        }
+        styles.push(Some(style));
+    }
+    if skip_stand {
+        let fill = if count > 0 {
+            (sum / count as f64) as f32
+        } else {
+            0.0
+        };
+        for (c, style) in chunks.iter().zip(&mut styles) {
+            for (t, x) in style.iter_mut().flatten().enumerate() {
+                if !judged(c, t, skip_stand) {
+                    *x = fill;
+                }
+            }
+        }
+    }
+    Ok((styles, sum, count))
+}
+
 pub fn assemble(
     chunks: &[TrajectoryChunk],
     amp: Option<&AmpTrainer>,
@@ -116,18 +164,24 @@ pub fn assemble(
     let mut batch = PpoBatch::default();
     let mut amp_features = Vec::new();
     let mut summary = episode_summary(chunks);
-    let (mut style_sum, mut steps) = (0f64, 0u64);
-    for c in chunks {
-        let rewards = match amp {
-            Some(amp) if c.amp_dim > 0 => {
-                let style = amp.style_rewards(&c.amp_features)?;
-                style_sum += style.iter().map(|&x| x as f64).sum::<f64>();
-                amp_features.extend_from_slice(&c.amp_features);
-                amp.combine_rewards(&c.rewards, &style)?
+    let (styles, style_sum, judged_steps) = match amp {
+        Some(amp) => chunk_styles(chunks, amp)?,
+        None => (vec![None; chunks.len()], 0.0, 0),
+    };
+    let skip_stand = amp.is_some_and(|a| !a.config.discriminate_stand);
+    for (c, style) in chunks.iter().zip(&styles) {
+        let rewards = match (amp, style) {
+            (Some(amp), Some(style)) => {
+                let dim = c.amp_dim as usize;
+                for (t, row) in c.amp_features.chunks_exact(dim).enumerate() {
+                    if judged(c, t, skip_stand) {
+                        amp_features.extend_from_slice(row);
+                    }
+                }
+                amp.combine_rewards(&c.rewards, style)?
             }
             _ => c.rewards.clone(),
         };
-        steps += c.rewards.len() as u64;
         let out = compute_gae(
             &GaeInput {
                 steps: c.num_steps as usize,
@@ -148,12 +202,97 @@ pub fn assemble(
         batch.advantages.extend(out.advantages);
         batch.returns.extend(out.returns);
     }
-    if steps > 0 {
-        summary.mean_style_reward = style_sum / steps as f64;
+    if judged_steps > 0 {
+        summary.mean_style_reward = style_sum / judged_steps as f64;
     }
     Ok(Assembled {
         batch,
         amp_features,
         summary,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use lhm_nets::MlpConfig;
+    use lhm_protos::WireMessage;
+
+    use super::*;
+    use crate::amp::AmpConfig;
+
+    /// One env's 4 steps of 2 AMP features each, row t = (t, -t) + offset; the gait stops from
+    /// step `stop_from` on (`None`: no gait flags).
+    fn chunk(offset: f32, stop_from: Option<usize>) -> TrajectoryChunk {
+        let n = 4usize;
+        TrajectoryChunk {
+            run_id: "r".into(),
+            actor_id: "a".into(),
+            num_steps: n as u32,
+            obs_dim: 1,
+            act_dim: 1,
+            amp_dim: 2,
+            observations: vec![0.0; n],
+            actions: vec![0.0; n],
+            log_probs: vec![0.0; n],
+            values: vec![0.0; n],
+            rewards: vec![1.0; n],
+            dones: vec![false; n],
+            truncated: vec![false; n],
+            truncation_values: vec![0.0; n],
+            amp_features: (0..n)
+                .flat_map(|t| [t as f32 + offset, -(t as f32) - offset])
+                .collect(),
+            gait_stopped: stop_from.map_or(vec![], |s| (0..n).map(|t| t >= s).collect()),
+            ..TrajectoryChunk::versioned()
+        }
+    }
+
+    fn trainer(discriminate_stand: bool) -> AmpTrainer {
+        let config = AmpConfig {
+            disc: MlpConfig::with_hidden(&[8]),
+            normalize_features: false,
+            discriminate_stand,
+            ..AmpConfig::default()
+        };
+        AmpTrainer::new(2, config).unwrap()
+    }
+
+    const GAE: GaeParams = GaeParams {
+        gamma: 0.9,
+        lambda: 0.9,
+    };
+
+    #[test]
+    fn stopped_steps_stay_out_of_the_discriminator_and_are_paid_the_judged_mean() {
+        let chunks = [chunk(0.0, Some(2)), chunk(10.0, None)];
+        let amp = trainer(false);
+        let out = assemble(&chunks, Some(&amp), GAE).unwrap();
+        // Steps 2 and 3 of the first chunk are left out: 6 of 8 rows, in order.
+        let judged: Vec<f32> = [0.0f32, 1.0, 10.0, 11.0, 12.0, 13.0]
+            .iter()
+            .flat_map(|&x| [x, -x])
+            .collect();
+        assert_eq!(out.amp_features, judged);
+        let style = amp.style_rewards(&judged).unwrap();
+        let mean = style.iter().sum::<f32>() / style.len() as f32;
+        assert!((out.summary.mean_style_reward as f32 - mean).abs() < 1e-5);
+        let (styles, _, count) = chunk_styles(&chunks, &amp).unwrap();
+        assert_eq!(count, 6);
+        let first = styles[0].as_ref().unwrap();
+        assert!((first[2] - mean).abs() < 1e-6 && (first[3] - mean).abs() < 1e-6);
+        assert_eq!(first[..2], style[..2]);
+        assert_eq!(styles[1].as_ref().unwrap()[..], style[2..]);
+    }
+
+    #[test]
+    fn by_default_every_step_is_judged_whatever_the_gait() {
+        let chunks = [chunk(0.0, Some(2)), chunk(10.0, None)];
+        let amp = trainer(true);
+        let out = assemble(&chunks, Some(&amp), GAE).unwrap();
+        let all: Vec<f32> = chunks.iter().flat_map(|c| c.amp_features.clone()).collect();
+        assert_eq!(out.amp_features, all);
+        let style = amp.style_rewards(&all).unwrap();
+        let mean = style.iter().sum::<f32>() / style.len() as f32;
+        assert!((out.summary.mean_style_reward as f32 - mean).abs() < 1e-5);
+    }
 }
