@@ -115,13 +115,20 @@ fn judged(chunk: &TrajectoryChunk, t: usize, skip_stand: bool) -> bool {
     !(skip_stand && chunk.gait_stopped.get(t).copied().unwrap_or(false))
 }
 
-/// Each chunk's style reward per step (`None` for chunks without AMP features), with the steps
-/// the discriminator does not judge paid the mean style of those it does, so leaving a stand out
-/// makes it neither cheaper nor dearer than walking. Also the sum and count of judged steps.
-fn chunk_styles(
-    chunks: &[TrajectoryChunk],
-    amp: &AmpTrainer,
-) -> LearnerResult<(Vec<Option<Vec<f32>>>, f64, u64)> {
+/// The style rewards of a batch's chunks.
+#[derive(Debug, Default)]
+struct ChunkStyles {
+    /// Per chunk, its style reward per step (`None` for chunks without AMP features).
+    per_chunk: Vec<Option<Vec<f32>>>,
+    /// Sum and count over the steps the discriminator judged.
+    judged_sum: f64,
+    judged_steps: u64,
+}
+
+/// Each chunk's style reward per step, with the steps the discriminator does not judge paid the
+/// mean style of those it does, so leaving a stand out makes it neither cheaper nor dearer than
+/// walking.
+fn chunk_styles(chunks: &[TrajectoryChunk], amp: &AmpTrainer) -> LearnerResult<ChunkStyles> {
     let skip_stand = !amp.config.discriminate_stand;
     let mut styles = Vec::with_capacity(chunks.len());
     let (mut sum, mut count) = (0f64, 0u64);
@@ -153,7 +160,11 @@ fn chunk_styles(
             }
         }
     }
-    Ok((styles, sum, count))
+    Ok(ChunkStyles {
+        per_chunk: styles,
+        judged_sum: sum,
+        judged_steps: count,
+    })
 }
 
 pub fn assemble(
@@ -164,12 +175,15 @@ pub fn assemble(
     let mut batch = PpoBatch::default();
     let mut amp_features = Vec::new();
     let mut summary = episode_summary(chunks);
-    let (styles, style_sum, judged_steps) = match amp {
+    let styles = match amp {
         Some(amp) => chunk_styles(chunks, amp)?,
-        None => (vec![None; chunks.len()], 0.0, 0),
+        None => ChunkStyles {
+            per_chunk: vec![None; chunks.len()],
+            ..ChunkStyles::default()
+        },
     };
     let skip_stand = amp.is_some_and(|a| !a.config.discriminate_stand);
-    for (c, style) in chunks.iter().zip(&styles) {
+    for (c, style) in chunks.iter().zip(&styles.per_chunk) {
         let rewards = match (amp, style) {
             (Some(amp), Some(style)) => {
                 let dim = c.amp_dim as usize;
@@ -202,8 +216,8 @@ pub fn assemble(
         batch.advantages.extend(out.advantages);
         batch.returns.extend(out.returns);
     }
-    if judged_steps > 0 {
-        summary.mean_style_reward = style_sum / judged_steps as f64;
+    if styles.judged_steps > 0 {
+        summary.mean_style_reward = styles.judged_sum / styles.judged_steps as f64;
     }
     Ok(Assembled {
         batch,
@@ -276,12 +290,12 @@ mod tests {
         let style = amp.style_rewards(&judged).unwrap();
         let mean = style.iter().sum::<f32>() / style.len() as f32;
         assert!((out.summary.mean_style_reward as f32 - mean).abs() < 1e-5);
-        let (styles, _, count) = chunk_styles(&chunks, &amp).unwrap();
-        assert_eq!(count, 6);
-        let first = styles[0].as_ref().unwrap();
+        let styles = chunk_styles(&chunks, &amp).unwrap();
+        assert_eq!(styles.judged_steps, 6);
+        let first = styles.per_chunk[0].as_ref().unwrap();
         assert!((first[2] - mean).abs() < 1e-6 && (first[3] - mean).abs() < 1e-6);
         assert_eq!(first[..2], style[..2]);
-        assert_eq!(styles[1].as_ref().unwrap()[..], style[2..]);
+        assert_eq!(styles.per_chunk[1].as_ref().unwrap()[..], style[2..]);
     }
 
     #[test]
