@@ -119,7 +119,7 @@ pub(crate) fn trajectory_chunk(m: &TrajectoryChunk) -> Result {
     c.len("dones", m.dones.len(), n)?;
     c.len("truncated", m.truncated.len(), n)?;
     c.len("truncation_values", m.truncation_values.len(), n)?;
-    // Empty where no gait runs, else one flag a step.
+    // Empty when no step of the chunk is stopped, else one flag a step.
     if !m.gait_stopped.is_empty() {
         c.len("gait_stopped", m.gait_stopped.len(), n)?;
     }

@@ -125,11 +125,14 @@ struct ChunkStyles {
     judged_steps: u64,
 }
 
-/// Each chunk's style reward per step, with the steps the discriminator does not judge paid the
-/// mean style of those it does, so leaving a stand out makes it neither cheaper nor dearer than
-/// walking.
-fn chunk_styles(chunks: &[TrajectoryChunk], amp: &AmpTrainer) -> LearnerResult<ChunkStyles> {
-    let skip_stand = !amp.config.discriminate_stand;
+/// Each chunk's style reward per step, with the steps the discriminator does not judge
+/// (`skip_stand`) paid the mean style of those it does, so leaving a stand out makes it neither
+/// cheaper nor dearer than walking.
+fn chunk_styles(
+    chunks: &[TrajectoryChunk],
+    amp: &AmpTrainer,
+    skip_stand: bool,
+) -> LearnerResult<ChunkStyles> {
     let mut styles = Vec::with_capacity(chunks.len());
     let (mut sum, mut count) = (0f64, 0u64);
     for c in chunks {
@@ -175,14 +178,14 @@ pub fn assemble(
     let mut batch = PpoBatch::default();
     let mut amp_features = Vec::new();
     let mut summary = episode_summary(chunks);
+    let skip_stand = amp.is_some_and(|a| !a.config.discriminate_stand);
     let styles = match amp {
-        Some(amp) => chunk_styles(chunks, amp)?,
+        Some(amp) => chunk_styles(chunks, amp, skip_stand)?,
         None => ChunkStyles {
             per_chunk: vec![None; chunks.len()],
             ..ChunkStyles::default()
         },
     };
-    let skip_stand = amp.is_some_and(|a| !a.config.discriminate_stand);
     for (c, style) in chunks.iter().zip(&styles.per_chunk) {
         let rewards = match (amp, style) {
             (Some(amp), Some(style)) => {
@@ -290,7 +293,7 @@ mod tests {
         let style = amp.style_rewards(&judged).unwrap();
         let mean = style.iter().sum::<f32>() / style.len() as f32;
         assert!((out.summary.mean_style_reward as f32 - mean).abs() < 1e-5);
-        let styles = chunk_styles(&chunks, &amp).unwrap();
+        let styles = chunk_styles(&chunks, &amp, true).unwrap();
         assert_eq!(styles.judged_steps, 6);
         let first = styles.per_chunk[0].as_ref().unwrap();
         assert!((first[2] - mean).abs() < 1e-6 && (first[3] - mean).abs() < 1e-6);
