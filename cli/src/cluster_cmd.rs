@@ -17,7 +17,9 @@ use lhm_protos::keys;
 
 #[derive(Args, Clone)]
 pub struct LearnerOpts {
-    /// Training configuration (TOML; every field optional). Default: the built-in Teacher 1 run.
+    /// Training configuration (TOML; every field optional, laid over the library's defaults).
+    /// Without it a plain `lhm train` runs the built-in Teacher 1 (`configs/teacher1.toml`: the
+    /// residual gait with PPO + AMP), and a `--stage` or `--teacher1` run the library's defaults.
     #[arg(long)]
     config: Option<PathBuf>,
     /// Run id (overrides the config's).
@@ -68,10 +70,26 @@ pub struct LearnerOpts {
     scenes: crate::scenes_cmd::Source,
 }
 
+/// `configs/teacher1.toml`, built in: the run a plain `lhm train` makes without `--config`.
+pub(crate) const TEACHER1_TOML: &str = include_str!("../../configs/teacher1.toml");
+
+/// [`TEACHER1_TOML`] laid over `TrainConfig::default()`, as `--config configs/teacher1.toml` is.
+pub(crate) fn teacher1_config() -> Result<TrainConfig> {
+    Ok(TrainConfig::from_toml_sources(&[(
+        "configs/teacher1.toml (built in)".into(),
+        TEACHER1_TOML.into(),
+    )])?)
+}
+
 impl LearnerOpts {
     fn train_config(&self) -> Result<TrainConfig> {
+        let plain_teacher1 =
+            self.stage.is_none() && self.teacher1.is_none() && self.teacher2.is_none();
         let mut config = match &self.config {
             Some(path) => TrainConfig::from_toml_file(path)?,
+            // The pipeline's stages and Teacher 2 keep `TrainConfig::default()` (their actors do
+            // not run the gait yet); a plain `lhm train` is Teacher 1 as it is trained today.
+            None if plain_teacher1 => teacher1_config()?,
             None => TrainConfig::default(),
         };
         if let Some(id) = &self.run_id {
@@ -608,6 +626,41 @@ mod tests {
             reach_rate,
             reach_rate_all,
         }
+    }
+
+    #[test]
+    fn a_plain_train_runs_the_built_in_teacher1_and_a_stage_the_library_defaults() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            opts: LearnerOpts,
+        }
+        let parse = |args: &[&str]| {
+            <Cli as clap::Parser>::try_parse_from(args)
+                .expect("flags")
+                .opts
+        };
+        let config = parse(&["lhm"])
+            .train_config()
+            .expect("the built-in configuration");
+        let gait = config
+            .env
+            .gait
+            .as_ref()
+            .expect("the built-in Teacher 1 walks on the gait");
+        assert_eq!(gait.stop_on, lhm_sim::env::StopOn::FeetDown);
+        assert_eq!(gait.rest_start_fraction, 0.5);
+        assert!(config.amp_enabled && !config.amp.discriminate_stand);
+        // Laid over the defaults, not replacing them: what the file does not name is the
+        // library's (a key the defaults do not know would have failed to parse).
+        assert_eq!(config.ppo, TrainConfig::default().ppo);
+        assert_eq!(config.run_id, TrainConfig::default().run_id);
+        assert!(parse(&["lhm", "--stage", "t1"])
+            .train_config()
+            .expect("t1")
+            .env
+            .gait
+            .is_none());
     }
 
     #[test]

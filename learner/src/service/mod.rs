@@ -319,17 +319,27 @@ impl TrainConfig {
     /// key over the ones before (e.g. a stage's configuration, then a pipeline-wide overlay).
     /// Errors name the file that was read last when the merged fields do not deserialise.
     pub fn from_toml_files(paths: &[&Path]) -> Result<Self, ServiceError> {
-        let mut merged = toml::Table::try_from(Self::default())
-            .map_err(|e| ServiceError::Config(format!("the built-in defaults: {e}")))?;
+        let mut sources = Vec::with_capacity(paths.len());
         for path in paths {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
+            sources.push((path.display().to_string(), text));
+        }
+        Self::from_toml_sources(&sources)
+    }
+
+    /// [`Self::from_toml_files`] on TOML texts already read, each with the name its errors give
+    /// (e.g. a configuration built into the binary).
+    pub fn from_toml_sources(sources: &[(String, String)]) -> Result<Self, ServiceError> {
+        let mut merged = toml::Table::try_from(Self::default())
+            .map_err(|e| ServiceError::Config(format!("the built-in defaults: {e}")))?;
+        for (name, text) in sources {
             let user: toml::Table = text
                 .parse()
-                .map_err(|e| ServiceError::Config(format!("{}: {e}", path.display())))?;
+                .map_err(|e| ServiceError::Config(format!("{name}: {e}")))?;
             overlay(&mut merged, user);
         }
-        let named: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+        let named: Vec<&str> = sources.iter().map(|(name, _)| name.as_str()).collect();
         serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| {
             ServiceError::Config(format!(
                 "{}: field `{}`: {}",
