@@ -192,6 +192,11 @@ pub struct GaitConfig {
     /// the task asks. Drawn before `near_start_fraction`; 0: never (`lhm eval --from-rest` and
     /// `render-rollout --from-rest` start every episode so).
     pub rest_start_fraction: f32,
+    /// Keep the cycle in time with the character's footfalls ([`GaitReference::advance`]): wait
+    /// at most `sync_wait` steps for a swing foot that lands late, jump up to `sync_skip` steps to
+    /// the reference's footfall when it lands early. 0 and 0 (the default): the plain clock.
+    pub sync_wait: usize,
+    pub sync_skip: usize,
     pub gains: BalanceGains,
     /// `[env.gait.start]`: how the base walks off from a start at rest (the default: no ramp,
     /// the walk's targets from the first step).
@@ -224,6 +229,8 @@ impl Default for GaitConfig {
             // validator's disc) brushes objects, 0.45 m passes them.
             route_clearance: 0.45,
             rest_start_fraction: 0.0,
+            sync_wait: 0,
+            sync_skip: 0,
             gains: BalanceGains::default(),
             start: StartRamp::default(),
             stop: StartRamp::default(),
@@ -297,6 +304,8 @@ struct GaitRun {
     /// Started at rest: [`StartRamp`] ramps the base in over the episode's first steps (a rest
     /// start is made on a fresh environment, so the episode's step count is the time since it).
     from_rest: bool,
+    /// Steps the cycle has waited in a row for a late footfall (`sync_wait`).
+    waited: usize,
 }
 
 impl Default for EnvConfig {
@@ -691,6 +700,7 @@ impl TaskEnv {
             stopped: false,
             stopped_at: 0,
             from_rest: false,
+            waited: 0,
         });
         true
     }
@@ -1101,7 +1111,14 @@ impl TaskEnv {
             *t = (*t + config.residual * character.action_scale[i] * a)
                 .clamp(d.range[0] as f32, d.range[1] as f32);
         }
-        run.step += 1;
+        run.step = run.reference.advance(
+            rig,
+            run.step,
+            &now,
+            &mut run.waited,
+            config.sync_wait,
+            config.sync_skip,
+        );
         Some(targets)
     }
 

@@ -946,6 +946,64 @@ fn the_cycle_waits_for_a_late_footfall_and_jumps_to_an_early_one() {
 }
 
 #[test]
+fn with_sync_wait_the_envs_cycle_waits_at_each_footfall_while_the_swing_foot_is_in_the_air() {
+    let model = CharacterModel::amp_humanoid();
+    let r = Arc::new(GaitReference::new(&model, &stepping_demo(&model), 0, 1.0 / 30.0).unwrap());
+    // The cycle steps the env runs through in two cycles' time, the character welded 1.6 m up
+    // (its feet never land).
+    let cycle_steps = |sync_wait: usize, sync_skip: usize| -> Vec<usize> {
+        let bench = Benchmark::embedded().unwrap();
+        let (_, task) = bench.task("train-0001").unwrap();
+        let sim = SimConfig {
+            pin_root: true,
+            spawn_height: 1.6,
+            ..SimConfig::default()
+        };
+        let gait = GaitConfig {
+            sync_wait,
+            sync_skip,
+            ..GaitConfig::default()
+        };
+        let config = EnvConfig {
+            gait: Some(gait),
+            ..EnvConfig::default()
+        };
+        let mut env = TaskEnv::new(&model, &task, &bench.catalogue, sim, config);
+        assert!(env.start_gait(Arc::clone(&r), 0));
+        let zero = vec![0.0; model.dofs.len()];
+        (0..2 * r.len())
+            .map(|_| {
+                env.step(&zero);
+                (env.gait_phase().unwrap() * r.len() as f32).round() as usize % r.len()
+            })
+            .collect()
+    };
+    let repeats = |steps: &[usize]| steps.windows(2).filter(|w| w[0] == w[1]).count();
+    let plain = cycle_steps(0, 0);
+    assert_eq!(repeats(&plain), 0, "the plain clock moves on every step");
+    // At each of the reference's footfalls the cycle holds 3 steps while the swing foot hangs in
+    // the air, then moves on (skipping needs a landed foot, so it changes nothing here).
+    let rig = Rig::new(&model).unwrap();
+    let waiting = cycle_steps(3, 3);
+    let mut held = 0;
+    for (i, w) in waiting.windows(2).enumerate() {
+        if w[0] == w[1] {
+            held += 1;
+            assert_ne!(
+                rig.stance(r.at(w[0] + 1).0),
+                rig.stance(r.at(w[0]).0),
+                "held at step {i} off a footfall"
+            );
+        } else {
+            assert!(held == 0 || held == 3, "held {held} steps before step {i}");
+            held = 0;
+        }
+    }
+    assert!(repeats(&waiting) >= 6, "{waiting:?}");
+    assert_eq!(repeats(&cycle_steps(0, 3)), 0);
+}
+
+#[test]
 fn a_frame_aligned_onto_a_root_takes_its_heading_and_ground_position_and_keeps_the_rest() {
     let model = CharacterModel::amp_humanoid();
     let frame = stride(&model);
