@@ -134,7 +134,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     );
                     let tilt = rotation_error(c.pelvis, f.pelvis);
                     let (to_first, to_other) = distances(&now[0]);
-                    rows.push(format!(
+                    rows.push((env.steps(), format!(
                         "{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.3},{:.2},{:.2},{:.3}",
                         phase,
                         c.v.x,
@@ -154,13 +154,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         to_first,
                         to_other,
                         pushed(&env)
-                    ));
+                    )));
                 }
                 if r.done || r.truncated || r.physics_invalid {
                     break (env.steps(), r.fell);
                 }
             };
-            for (step, row) in rows.iter().enumerate() {
+            // `step`: the env's step count after the step the row describes (as `end` counts).
+            for (step, row) in &rows {
                 println!(
                     "{},{seed},{distance:.2},{step},{end},{},{row}",
                     task.id,

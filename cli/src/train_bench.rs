@@ -1,7 +1,7 @@
 //! `lhm bench train`: the whole training loop's throughput against the environment alone, in one
 //! run on the same machine: `lhm bench env`'s all-cores figure, then a real `lhm train` (learner
-//! plus one actor process per core, the embedded default) for a fixed number of iterations, read
-//! back from its `metrics.csv`.
+//! plus one actor process per core, the library's Teacher 1 stage) for a fixed number of
+//! iterations, read back from its `metrics.csv`.
 
 use anyhow::{bail, Context, Result};
 use lhm_scenes::Benchmark;
@@ -97,10 +97,19 @@ pub fn run(iterations: u64, warmup: u64, amp: bool) -> Result<TrainBench> {
     let _ = std::fs::remove_dir_all(&dir);
     let exe = crate::cluster_cmd::this_executable()?;
     let mut cmd = Command::new(exe);
-    cmd.args(["train", "--run-id", "bench-train", "--max-iterations"])
-        .arg(iterations.to_string())
-        .arg("--runs-dir")
-        .arg(&dir);
+    // `--stage t1`: the library's Teacher 1 configuration, the environment `lhm bench env`
+    // measures above (a plain `lhm train` runs the residual gait of `configs/teacher1.toml`).
+    cmd.args([
+        "train",
+        "--stage",
+        "t1",
+        "--run-id",
+        "bench-train",
+        "--max-iterations",
+    ])
+    .arg(iterations.to_string())
+    .arg("--runs-dir")
+    .arg(&dir);
     if !amp {
         cmd.arg("--no-amp");
     }

@@ -194,7 +194,8 @@ pub struct GaitConfig {
     pub rest_start_fraction: f32,
     /// Keep the cycle in time with the character's footfalls ([`GaitReference::advance`]): wait
     /// at most `sync_wait` steps for a swing foot that lands late, jump up to `sync_skip` steps to
-    /// the reference's footfall when it lands early. 0 and 0 (the default): the plain clock.
+    /// the reference's footfall when it lands early — while walking (not during the start ramp
+    /// from rest, nor after the stop). 0 and 0 (the default): the plain clock.
     pub sync_wait: usize,
     pub sync_skip: usize,
     pub gains: BalanceGains,
@@ -1111,14 +1112,22 @@ impl TaskEnv {
             *t = (*t + config.residual * character.action_scale[i] * a)
                 .clamp(d.range[0] as f32, d.range[1] as f32);
         }
-        run.step = run.reference.advance(
-            rig,
-            run.step,
-            &now,
-            &mut run.waited,
-            config.sync_wait,
-            config.sync_skip,
-        );
+        // The footfalls keep the clock only while the character walks: standing before the start
+        // ramp is over or after the stop both feet are down, which `advance` would read as an
+        // early landing and jump the cycle on every step.
+        let ramping = run.from_rest && (self.steps as f32) < config.start.seconds * hz;
+        run.step = if run.stopped || ramping {
+            run.step + 1
+        } else {
+            run.reference.advance(
+                rig,
+                run.step,
+                &now,
+                &mut run.waited,
+                config.sync_wait,
+                config.sync_skip,
+            )
+        };
         Some(targets)
     }
 

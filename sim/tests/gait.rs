@@ -1004,6 +1004,45 @@ fn with_sync_wait_the_envs_cycle_waits_at_each_footfall_while_the_swing_foot_is_
 }
 
 #[test]
+fn the_clock_keeps_its_pace_during_the_start_ramp_and_jumps_to_footfalls_of_landed_feet_without() {
+    let model = CharacterModel::amp_humanoid();
+    let r = Arc::new(GaitReference::new(&model, &stepping_demo(&model), 0, 1.0 / 30.0).unwrap());
+    // The cycle steps of the first 15 control steps from the task's standing start (both feet
+    // on the ground), sync_skip 3, with a start ramp of `ramp_seconds`.
+    let cycle_steps = |ramp_seconds: f32| -> Vec<usize> {
+        let gait = GaitConfig {
+            sync_skip: 3,
+            start: StartRamp {
+                seconds: ramp_seconds,
+                ..StartRamp::default()
+            },
+            ..GaitConfig::default()
+        };
+        let mut env = gait_env(&model, Some(gait));
+        let yaw = env.yaw_toward_first_object();
+        assert!(env.start_at_rest_in_gait(Arc::clone(&r), 0, yaw));
+        let zero = vec![0.0; model.dofs.len()];
+        let mut steps = vec![0];
+        for _ in 0..15 {
+            env.step(&zero);
+            steps.push((env.gait_phase().unwrap() * r.len() as f32).round() as usize % r.len());
+        }
+        steps
+    };
+    let ramped = cycle_steps(1.0);
+    assert!(
+        ramped.windows(2).all(|w| w[1] == (w[0] + 1) % r.len()),
+        "one step a step during the ramp: {ramped:?}"
+    );
+    // Without a ramp the character stands, feet down, as the cycle starts: it jumps.
+    let unramped = cycle_steps(0.0);
+    assert!(
+        unramped.windows(2).any(|w| w[1] > w[0] + 1),
+        "a jump to a footfall: {unramped:?}"
+    );
+}
+
+#[test]
 fn a_frame_aligned_onto_a_root_takes_its_heading_and_ground_position_and_keeps_the_rest() {
     let model = CharacterModel::amp_humanoid();
     let frame = stride(&model);

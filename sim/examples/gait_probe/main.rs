@@ -332,6 +332,9 @@ fn rollout_room(s: &Setup, g: &[f32], i: usize, steps: usize) -> (usize, f32) {
         stop: gains.stop,
         stop_distance: s.stop_distance,
         start_distance: s.near,
+        // SYNC_WAIT / SYNC_SKIP, as the probe's own rollouts use them.
+        sync_wait: s.sync.0,
+        sync_skip: s.sync.1,
         ..GaitConfig::default()
     });
     let mut env = TaskEnv::new(&s.model, &task, &s.bench.catalogue, s.sim.clone(), config);
