@@ -7,13 +7,12 @@
 //! foot, and the episode's end (the step it fell, or -1).
 //! `cargo run --release -p lhm-cli --example fall_trace -- RUN_DIR [MIN_DISTANCE] [SEEDS] > trace.csv`
 //! (RUN_DIR holds `config.toml` and `checkpoint` or `policy`).
+#[path = "shared/gait_run.rs"]
+mod gait_run;
+use gait_run::GaitRun;
 use lhm_actor::eval::{EvalSetup, GaitStart};
-use lhm_learner::service::TrainConfig;
-use lhm_learner::Learner;
-use lhm_scenes::{Benchmark, Split};
+use lhm_scenes::Split;
 use lhm_sim::gait::{aligned_to, balance, rotation_error, Rig};
-use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
-use lhm_sim::CharacterModel;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -25,32 +24,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let min_distance: f32 = args.next().map_or(Ok(3.0), |s| s.parse())?;
     let seeds: u64 = args.next().map_or(Ok(4), |s| s.parse())?;
-    let config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
     let stem = if dir.join("checkpoint.json").is_file() {
-        dir.join("checkpoint")
+        "checkpoint"
     } else {
-        dir.join("policy")
+        "policy"
     };
-    let learner = Learner::load(&stem, None)?;
-    let gait = config
-        .env
-        .gait
-        .as_ref()
-        .ok_or("the run has no [env.gait]")?;
-    let model = CharacterModel::amp_humanoid();
+    let GaitRun {
+        config,
+        learner,
+        model,
+        bench,
+        demo,
+        reference,
+    } = GaitRun::load(&dir, stem)?;
     let rig = Rig::new(&model).ok_or("the character has no gait rig")?;
-    let bench = Benchmark::embedded()?;
-    let demo = DemoMotion::load_dir(
-        &model,
-        &lhm_sim::motion::default_dir(),
-        AmpWindow::of(&config.env, &config.sim),
-    )?;
-    let reference = Arc::new(lhm_sim::gait::reference_for(
-        &model,
-        &demo,
-        &gait.clip,
-        1.0 / config.sim.control_hz,
-    )?);
     let env_config = config.env.clone();
     let setup = EvalSetup {
         model: &model,

@@ -8,15 +8,14 @@
 //! scale=JOINT:K]` (`zero`: the gait base alone acts, zero residuals, judged by the run's
 //! discriminator; `scale=abdomen:0`: the residual on the joints whose name contains `abdomen` times 0).
 //! Also prints how many episodes fell.
+#[path = "shared/gait_run.rs"]
+mod gait_run;
+use gait_run::GaitRun;
 use lhm_actor::eval::{EvalSetup, GaitStart};
-use lhm_learner::service::TrainConfig;
-use lhm_learner::Learner;
 use lhm_nets::SplitMix64;
-use lhm_scenes::{Benchmark, Split};
+use lhm_scenes::Split;
 use lhm_sim::mjcf::JointKind;
-use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::obs::amp_frame_dim;
-use lhm_sim::CharacterModel;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -44,37 +43,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Some((joint.to_string(), k.parse().map_err(|_| bad())?))
         }
     };
-    let config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
-    let learner = Learner::load(&dir.join("checkpoint"), None)?;
+    let GaitRun {
+        config,
+        learner,
+        model,
+        bench,
+        demo,
+        reference,
+    } = GaitRun::load(&dir, "checkpoint")?;
     let amp = learner
         .amp
         .as_ref()
         .ok_or("no discriminator in this checkpoint (AMP off)")?;
-    let gait = config
-        .env
-        .gait
-        .as_ref()
-        .ok_or("the run has no [env.gait]")?;
-    let model = CharacterModel::amp_humanoid();
     if let Some((joint, _)) = &scaled {
         if !model.dofs.iter().any(|d| d.name.contains(joint.as_str())) {
             let names: Vec<&str> = model.dofs.iter().map(|d| d.name.as_str()).collect();
             return Err(format!("scale={joint}: no joint's name contains it ({names:?})").into());
         }
     }
-    let bench = Benchmark::embedded()?;
-    let demo = DemoMotion::load_dir(
-        &model,
-        &lhm_sim::motion::default_dir(),
-        AmpWindow::of(&config.env, &config.sim),
-    )?
-    .with_source_weights(config.amp.demo_weights)?;
-    let reference = Arc::new(lhm_sim::gait::reference_for(
-        &model,
-        &demo,
-        &gait.clip,
-        1.0 / config.sim.control_hz,
-    )?);
     let unseen: Vec<_> = bench
         .tasks(Split::Unseen)
         .iter()

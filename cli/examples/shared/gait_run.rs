@@ -1,0 +1,59 @@
+//! What the `[env.gait]` diagnostics (`gait_style_probe`, `fall_trace`) load from a run directory:
+//! its configuration, its learner, the clips and the gait's cycle. Included with `#[path]`; not an
+//! example of its own.
+use lhm_learner::service::TrainConfig;
+use lhm_learner::Learner;
+use lhm_scenes::Benchmark;
+use lhm_sim::gait::GaitReference;
+use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
+use lhm_sim::CharacterModel;
+use std::path::Path;
+use std::sync::Arc;
+
+pub struct GaitRun {
+    pub config: TrainConfig,
+    pub learner: Learner,
+    pub model: CharacterModel,
+    pub bench: Benchmark,
+    /// The installed clips, weighted as the run's discriminator weighs them.
+    pub demo: DemoMotion,
+    pub reference: Arc<GaitReference>,
+}
+
+impl GaitRun {
+    /// `dir`'s `config.toml` and checkpoint `stem` (e.g. "checkpoint" or "policy"); an error when
+    /// the run has no `[env.gait]`.
+    pub fn load(dir: &Path, stem: &str) -> Result<Self, Box<dyn std::error::Error>> {
+        let config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
+        let learner = Learner::load(&dir.join(stem), None)?;
+        let clip = config
+            .env
+            .gait
+            .as_ref()
+            .ok_or("the run has no [env.gait]")?
+            .clip
+            .clone();
+        let model = CharacterModel::amp_humanoid();
+        let bench = Benchmark::embedded()?;
+        let demo = DemoMotion::load_dir(
+            &model,
+            &lhm_sim::motion::default_dir(),
+            AmpWindow::of(&config.env, &config.sim),
+        )?
+        .with_source_weights(config.amp.demo_weights)?;
+        let reference = Arc::new(lhm_sim::gait::reference_for(
+            &model,
+            &demo,
+            &clip,
+            1.0 / config.sim.control_hz,
+        )?);
+        Ok(Self {
+            config,
+            learner,
+            model,
+            bench,
+            demo,
+            reference,
+        })
+    }
+}
