@@ -4,7 +4,8 @@
 //! control step while the gait walks: the character's centre-of-mass velocity and offset over its
 //! stance foot, its pelvis tilt, each against the gait reference's (aligned to the character, as
 //! the base's feedback sees them), whether the character's lower foot is the reference's stance
-//! foot, and the episode's end (the step it fell, or -1).
+//! foot, each foot's velocity forward and sideways while it is on the ground (slip; empty in the air), the
+//! hips' pitch against the reference's, and the episode's end (the step it fell, or -1).
 //! `cargo run --release -p lhm-cli --example fall_trace -- RUN_DIR [MIN_DISTANCE] [SEEDS] > trace.csv`
 //! (RUN_DIR holds `config.toml` and `checkpoint` or `policy`).
 #[path = "shared/gait_run.rs"]
@@ -12,7 +13,9 @@ mod gait_run;
 use gait_run::GaitRun;
 use lhm_actor::eval::{EvalSetup, GaitStart};
 use lhm_scenes::Split;
-use lhm_sim::gait::{aligned_to, balance, rotation_error, Rig};
+use lhm_sim::fidelity::joint_angles;
+use lhm_sim::gait::{aligned_to, balance, rotation_error, Rig, CONTACT_HEIGHT};
+use lhm_sim::obs::HeadingFrame;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -57,7 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "task,seed,distance,step,end,fell,phase,v_fwd,v_lat,ref_v_fwd,ref_v_lat,d_fwd,d_lat,\
          ref_d_fwd,ref_d_lat,pitch_err,roll_err,rate_pitch,rate_roll,stance_mismatch,root_z,to_object,\
-         to_other,others_moved"
+         to_other,others_moved,slip_fwd_0,slip_lat_0,slip_fwd_1,slip_lat_1,hip_y_0,hip_y_1,ref_hip_y_0,ref_hip_y_1"
     );
     // The first pair alone, as `lhm eval --first-pair` plays it (the other objects stay).
     let first_pairs: Vec<_> = bench
@@ -121,8 +124,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     );
                     let tilt = rotation_error(c.pelvis, f.pelvis);
                     let (to_first, to_other) = distances(&now[0]);
+                    // A foot on the ground that moves is slipping: its velocity forward (along
+                    // the character's heading; < 0: sliding back) and sideways.
+                    let heading = HeadingFrame::of(&now[0]);
+                    let slip = rig.foot.map(|f| {
+                        let b = &now[f];
+                        if b.pos.z < CONTACT_HEIGHT {
+                            let v = heading.vector(b.linvel);
+                            format!("{:.3},{:.3}", v.x, v.y)
+                        } else {
+                            ",".to_string()
+                        }
+                    });
+                    let (angles, reference_angles) =
+                        (joint_angles(&model, &now), reference.at(k).1);
+                    let hips = format!(
+                        "{:.3},{:.3},{:.3},{:.3}",
+                        angles[rig.hip_y[0]],
+                        angles[rig.hip_y[1]],
+                        reference_angles[rig.hip_y[0]],
+                        reference_angles[rig.hip_y[1]]
+                    );
                     rows.push((env.steps(), format!(
-                        "{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.3},{:.2},{:.2},{:.3}",
+                        "{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.3},{:.2},{:.2},{:.3},{},{},{}",
                         phase,
                         c.v.x,
                         c.v.y,
@@ -140,7 +164,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         now[0].pos.z,
                         to_first,
                         to_other,
-                        pushed(&env)
+                        pushed(&env),
+                        slip[0],
+                        slip[1],
+                        hips
                     )));
                 }
                 if r.done || r.truncated || r.physics_invalid {

@@ -198,6 +198,17 @@ pub struct GaitConfig {
     /// from rest, nor after the stop). 0 and 0 (the default): the plain clock.
     pub sync_wait: usize,
     pub sync_skip: usize,
+    /// Above 0: the walk pauses once the root is this far (m, straight) from where the walk last
+    /// started, while the object is still at least `bout_min_left` away — the base stops as at
+    /// the object (`stop_on`), stands `pause_seconds` and walks off again through the start ramp
+    /// (`[env.gait.start]`) as from rest. A long walk becomes a chain of the short ones a trained
+    /// policy keeps up: its walk gives way after ~2-3 m while its stop and its start from rest
+    /// hold (RESULTS.md, twenty-eighth to thirtieth sessions). 0 (the default): one walk.
+    pub bout_distance: f32,
+    /// With `bout_distance`: no pause unless the object is at least this far (m) from the root.
+    pub bout_min_left: f32,
+    /// With `bout_distance`: how long (s) the base stands in a pause before it walks on.
+    pub pause_seconds: f32,
     pub gains: BalanceGains,
     /// `[env.gait.start]`: how the base walks off from a start at rest (the default: no ramp,
     /// the walk's targets from the first step).
@@ -232,6 +243,9 @@ impl Default for GaitConfig {
             rest_start_fraction: 0.0,
             sync_wait: 0,
             sync_skip: 0,
+            bout_distance: 0.0,
+            bout_min_left: 1.2,
+            pause_seconds: 1.0,
             gains: BalanceGains::default(),
             start: StartRamp::default(),
             stop: StartRamp::default(),
@@ -298,15 +312,62 @@ struct GaitRun {
     /// The episode's step count when the gait came within `stop_distance` of the object (it
     /// stops then or at the footfall `stop_on` waits for).
     armed_at: Option<u32>,
-    /// The gait stopped ([`stop_now`]) and stands from then on.
+    /// The gait stopped ([`stop_now`]) and stands: from then on, or to the end of a pause.
     stopped: bool,
     /// The episode's step count when it stopped (the stop ramp's clock).
     stopped_at: u32,
-    /// Started at rest: [`StartRamp`] ramps the base in over the episode's first steps (a rest
-    /// start is made on a fresh environment, so the episode's step count is the time since it).
+    /// Started at rest: [`StartRamp`] ramps the base in from step `started_at` (a rest start is
+    /// made on a fresh environment: 0; a walk on after a pause: the step it walked on).
     from_rest: bool,
+    started_at: u32,
+    /// Where (horizontally) the current walk started: the bout's origin (`bout_distance`).
+    walk_from: Option<Vector>,
+    /// The current stop is a pause (`bout_distance`): the base walks on `pause_seconds` after it.
+    pausing: bool,
     /// Steps the cycle has waited in a row for a late footfall (`sync_wait`).
     waited: usize,
+}
+
+impl GaitRun {
+    /// `[env.gait] bout_distance`: once a pause has lasted `pause_seconds`, walk off again as
+    /// from rest (the start ramp from step `steps`, the next bout measured from `root`).
+    fn walk_on_after_pause(
+        &mut self,
+        config: &GaitConfig,
+        steps: u32,
+        hz: f32,
+        root: Option<Vector>,
+    ) {
+        if self.pausing && steps.saturating_sub(self.stopped_at) as f32 >= config.pause_seconds * hz
+        {
+            self.stopped = false;
+            self.pausing = false;
+            self.armed_at = None;
+            self.from_rest = true;
+            self.started_at = steps;
+            self.walk_from = root;
+        }
+        if self.walk_from.is_none() {
+            self.walk_from = root;
+        }
+    }
+
+    /// `[env.gait] bout_distance`: a walking base with no stop armed arms a pause (it stops as
+    /// `stop_on` says) once `root` is `bout_distance` from where the walk started and the object
+    /// is still `left` ≥ `bout_min_left` m away.
+    fn arm_pause(&mut self, config: &GaitConfig, steps: u32, root: Option<Vector>, left: f32) {
+        let walked = root
+            .zip(self.walk_from)
+            .map_or(0.0, |(r, from)| (r - from).length());
+        if self.armed_at.is_none()
+            && config.bout_distance > 0.0
+            && walked >= config.bout_distance
+            && left >= config.bout_min_left
+        {
+            self.armed_at = Some(steps);
+            self.pausing = true;
+        }
+    }
 }
 
 impl Default for EnvConfig {
@@ -701,6 +762,9 @@ impl TaskEnv {
             stopped: false,
             stopped_at: 0,
             from_rest: false,
+            started_at: 0,
+            walk_from: None,
+            pausing: false,
             waited: 0,
         });
         true
@@ -852,8 +916,8 @@ impl TaskEnv {
         })
     }
 
-    /// Whether this episode's gait has stopped (the character stands from then on); false
-    /// without a gait.
+    /// Whether this episode's gait has stopped (the character stands from then on, or to the end
+    /// of a pause with `bout_distance`); false without a gait.
     pub fn gait_stopped(&self) -> bool {
         self.gait.as_ref().is_some_and(|g| g.stopped)
     }
@@ -869,7 +933,7 @@ impl TaskEnv {
             return false;
         };
         stand_over(
-            run.stopped.then_some(run.stopped_at),
+            (run.stopped && !run.pausing).then_some(run.stopped_at),
             self.steps,
             config.stand_seconds,
             self.world.config.control_hz,
@@ -1050,12 +1114,15 @@ impl TaskEnv {
             self.rig.as_ref()?,
             self.config.gait.as_ref()?,
         );
+        let hz = self.world.config.control_hz;
+        let root = now.first().map(|r| Vector::new(r.pos.x, r.pos.y, 0.0));
+        run.walk_on_after_pause(config, self.steps, hz, root);
         if let Some(to) = object.filter(|_| !run.stopped) {
-            if run.armed_at.is_none()
-                && Vector::new(to.x, to.y, 0.0).length() < config.stop_distance
-            {
+            let left = Vector::new(to.x, to.y, 0.0).length();
+            if run.armed_at.is_none() && left < config.stop_distance {
                 run.armed_at = Some(self.steps);
             }
+            run.arm_pause(config, self.steps, root, left);
             if let Some(armed) = run.armed_at {
                 if stop_now(
                     config.stop_on,
@@ -1070,7 +1137,7 @@ impl TaskEnv {
             }
         }
         let (reference_now, angles) = run.reference.at(run.step);
-        let hz = self.world.config.control_hz;
+        let ramp_elapsed = self.steps.saturating_sub(run.started_at) as f32 / hz;
         let mut targets = match (run.stopped, run.from_rest) {
             (true, _) => stop_targets(
                 rig,
@@ -1085,7 +1152,7 @@ impl TaskEnv {
                 rig,
                 &config.gains,
                 &config.start,
-                self.steps as f32 / hz,
+                ramp_elapsed,
                 &now,
                 reference_now,
                 angles,
@@ -1115,7 +1182,7 @@ impl TaskEnv {
         // The footfalls keep the clock only while the character walks: standing before the start
         // ramp is over or after the stop both feet are down, which `advance` would read as an
         // early landing and jump the cycle on every step.
-        let ramping = run.from_rest && (self.steps as f32) < config.start.seconds * hz;
+        let ramping = run.from_rest && ramp_elapsed < config.start.seconds;
         run.step = if run.stopped || ramping {
             run.step + 1
         } else {

@@ -1191,3 +1191,47 @@ fn a_room_without_furniture_keeps_walls_start_and_objects_and_puts_raised_ones_o
         }
     }
 }
+
+#[test]
+fn with_bouts_the_walk_pauses_after_bout_distance_stands_pause_seconds_and_walks_on() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    // Per step for 40 steps from a walking start (the synthetic cycle's 1 m/s): whether the
+    // gait is stopped, and whether the step ended the episode early by the stand's rule.
+    let run = |bout_min_left: f32| -> (Vec<bool>, bool) {
+        let gait = GaitConfig {
+            bout_distance: 0.2,
+            bout_min_left,
+            pause_seconds: 0.2,
+            // A stand rule shorter than the pause: a pause is no stand and ends no episode.
+            stand_seconds: 0.1,
+            ..GaitConfig::default()
+        };
+        let mut env = gait_env(&model, Some(gait));
+        let yaw = env.yaw_toward_first_object();
+        assert!(env.start_in_gait(&demo, Arc::clone(&reference), 9, yaw));
+        let zero = vec![0.0; model.dofs.len()];
+        let mut truncated = false;
+        let stopped = (0..40)
+            .map(|_| {
+                truncated |= env.step(&zero).truncated;
+                env.gait_stopped()
+            })
+            .collect();
+        (stopped, truncated)
+    };
+    let (stopped, truncated) = run(0.0);
+    let first = stopped.iter().position(|&s| s).expect("the walk pauses");
+    assert!(first >= 2, "it walks 0.2 m first: {stopped:?}");
+    let pause = stopped[first..].iter().take_while(|&&s| s).count();
+    assert!(
+        (5..=7).contains(&pause),
+        "0.2 s at 30 Hz: {pause} steps, {stopped:?}"
+    );
+    assert!(!stopped[first + pause], "and walks on: {stopped:?}");
+    assert!(!truncated, "a pause is not the stand after the stop");
+    // The object nearer than `bout_min_left`: no pause.
+    let (stopped, _) = run(1000.0);
+    assert!(stopped.iter().all(|&s| !s), "{stopped:?}");
+}

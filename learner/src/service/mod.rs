@@ -247,6 +247,17 @@ impl TrainConfig {
                     )));
                 }
             }
+            for (name, x) in [
+                ("bout_distance", g.bout_distance),
+                ("bout_min_left", g.bout_min_left),
+                ("pause_seconds", g.pause_seconds),
+            ] {
+                if !(x.is_finite() && x >= 0.0) {
+                    return Err(ServiceError::Config(format!(
+                        "env.gait.{name} must be a finite number >= 0, got {x}"
+                    )));
+                }
+            }
         }
         if self.role == "vla" {
             let vla = self.network.policy.vla.as_ref().ok_or_else(|| {
@@ -1383,6 +1394,33 @@ mod tests {
             .collect();
         assert_eq!(roles, vec![Role::Teacher1, Role::Teacher2]);
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_negative_or_non_finite_bout_setting_is_refused_by_name() {
+        let mut config = TrainConfig::default();
+        for name in ["bout_distance", "bout_min_left", "pause_seconds"] {
+            for (x, ok) in [
+                (0.0, true),
+                (2.0, true),
+                (-0.5, false),
+                (f32::NAN, false),
+                (f32::INFINITY, false),
+            ] {
+                let mut g = lhm_sim::env::GaitConfig::default();
+                match name {
+                    "bout_distance" => g.bout_distance = x,
+                    "bout_min_left" => g.bout_min_left = x,
+                    _ => g.pause_seconds = x,
+                }
+                config.env.gait = Some(g);
+                let result = config.check();
+                assert_eq!(result.is_ok(), ok, "{name} {x}: {result:?}");
+                if let Err(e) = result {
+                    assert!(e.to_string().contains(&format!("env.gait.{name}")), "{e}");
+                }
+            }
+        }
     }
 
     #[test]
