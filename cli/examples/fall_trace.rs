@@ -4,8 +4,9 @@
 //! control step while the gait walks: the character's centre-of-mass velocity and offset over its
 //! stance foot, its pelvis tilt, each against the gait reference's (aligned to the character, as
 //! the base's feedback sees them), whether the character's lower foot is the reference's stance
-//! foot, each foot's velocity forward and sideways while it is on the ground (slip; empty in the air), the
-//! hips' pitch against the reference's, and the episode's end (the step it fell, or -1).
+//! foot, each foot's velocity forward and sideways while it is on the ground (slip; empty in the
+//! air), the hips' pitch, the knees and the ankles' pitch against the reference's, and the
+//! episode's end (the step it fell, or -1).
 //! `cargo run --release -p lhm-cli --example fall_trace -- RUN_DIR [MIN_DISTANCE] [SEEDS] > trace.csv`
 //! (RUN_DIR holds `config.toml` and `checkpoint` or `policy`).
 #[path = "shared/gait_run.rs"]
@@ -60,7 +61,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "task,seed,distance,step,end,fell,phase,v_fwd,v_lat,ref_v_fwd,ref_v_lat,d_fwd,d_lat,\
          ref_d_fwd,ref_d_lat,pitch_err,roll_err,rate_pitch,rate_roll,stance_mismatch,root_z,to_object,\
-         to_other,others_moved,slip_fwd_0,slip_lat_0,slip_fwd_1,slip_lat_1,hip_y_0,hip_y_1,ref_hip_y_0,ref_hip_y_1"
+         to_other,others_moved,slip_fwd_0,slip_lat_0,slip_fwd_1,slip_lat_1,hip_y_0,hip_y_1,ref_hip_y_0,ref_hip_y_1,\
+         knee_0,knee_1,ref_knee_0,ref_knee_1,ankle_y_0,ankle_y_1,ref_ankle_y_0,ref_ankle_y_1"
     );
     // The first pair alone, as `lhm eval --first-pair` plays it (the other objects stay).
     let first_pairs: Vec<_> = bench
@@ -138,13 +140,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     });
                     let (angles, reference_angles) =
                         (joint_angles(&model, &now), reference.at(k).1);
-                    let hips = format!(
-                        "{:.3},{:.3},{:.3},{:.3}",
-                        angles[rig.hip_y[0]],
-                        angles[rig.hip_y[1]],
-                        reference_angles[rig.hip_y[0]],
-                        reference_angles[rig.hip_y[1]]
-                    );
+                    // Hip pitch, knee and ankle pitch, each leg's and the reference's.
+                    let hips = [rig.hip_y, rig.knee, rig.ankle_y]
+                        .iter()
+                        .flat_map(|dofs| {
+                            let (a, r) = (&angles, reference_angles);
+                            [a[dofs[0]], a[dofs[1]], r[dofs[0]], r[dofs[1]]]
+                        })
+                        .map(|x| format!("{x:.3}"))
+                        .collect::<Vec<_>>()
+                        .join(",");
                     rows.push((env.steps(), format!(
                         "{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},{:.3},{:.2},{:.2},{:.3},{},{},{}",
                         phase,

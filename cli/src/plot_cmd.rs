@@ -368,8 +368,8 @@ fn plot(metrics: &Metrics, source: &str, output: &Path, size: (u32, u32)) -> Res
                 .axis_desc_style(("sans-serif", 15))
                 .light_line_style(WHITE.mix(0.0))
                 .bold_line_style(BLACK.mix(0.08))
-                .x_label_formatter(&|v| tick(*v))
-                .y_label_formatter(&|v| tick(*v))
+                .x_label_formatter(&|v| tick(*v, x_hi - x_lo))
+                .y_label_formatter(&|v| tick(*v, y_hi - y_lo))
                 .draw()?;
             let raw = segments(&x, y);
             if raw.is_empty() {
@@ -401,8 +401,10 @@ fn plot(metrics: &Metrics, source: &str, output: &Path, size: (u32, u32)) -> Res
     Ok(panels.len())
 }
 
-/// Tick labels: short, without float noise or trailing zeros (0.5, 2.5, 1200, 1.5e6).
-fn tick(v: f64) -> String {
+/// Tick labels: short, without float noise or trailing zeros (0.5, 2.5, 1200, 1.5e6), with enough
+/// decimals to tell apart the ~5 ticks of an axis `span` wide (a style reward between 1.25 and
+/// 1.42 reads 1.3, 1.35, 1.4, not 1.3, 1.3, 1.4, 1.4). `span` 0: no such floor.
+fn tick(v: f64, span: f64) -> String {
     let a = v.abs();
     if a < 1e-9 {
         return "0".into();
@@ -410,13 +412,19 @@ fn tick(v: f64) -> String {
     if !(1e-3..1e6).contains(&a) {
         return format!("{v:.1e}");
     }
-    let decimals = if a >= 100.0 {
+    let short = if a >= 100.0 {
         0
     } else if a >= 1.0 {
         1
     } else {
         3
     };
+    let resolving = if span > 0.0 {
+        (-(span / 5.0).log10()).ceil().clamp(0.0, 4.0) as usize
+    } else {
+        0
+    };
+    let decimals = short.max(resolving);
     let s = format!("{v:.decimals$}");
     if s.contains('.') {
         s.trim_end_matches('0').trim_end_matches('.').to_string()
@@ -500,12 +508,17 @@ mod tests {
     fn plot_tick_labels_are_short() {
         let ticks: Vec<String> = [0.0, 0.5, 0.25, 2.0, 2.5, 150.0, 24000.0, 2e6, 1e-4, -0.1]
             .iter()
-            .map(|&v| tick(v))
+            .map(|&v| tick(v, 0.0))
             .collect();
         let want = [
             "0", "0.5", "0.25", "2", "2.5", "150", "24000", "2.0e6", "1.0e-4", "-0.1",
         ];
         assert_eq!(ticks, want);
+        // A narrow axis gets the decimals that tell its ticks apart; a wide one stays short.
+        let narrow: Vec<String> = [1.3, 1.35, 1.4].iter().map(|&v| tick(v, 0.17)).collect();
+        assert_eq!(narrow, ["1.3", "1.35", "1.4"]);
+        assert_eq!(tick(150.0, 250.0), "150");
+        assert_eq!(tick(0.25, 1.0), "0.25");
     }
 
     #[test]

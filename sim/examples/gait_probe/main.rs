@@ -12,7 +12,8 @@
 //!
 //! Search: `gait_probe [ITERATIONS] [CLIP]` ((μ/μ, λ) ES from zeros, i.e. open-loop tracking;
 //! `START=default` or `START=g0,g1,…` (the order of `BalanceGains::NAMES`) to start elsewhere,
-//! `SIGMA`, `ELITIST=1` for a (1+λ) search around the best at a fixed step). It prints every new
+//! `SIGMA`, `ELITIST=1` for a (1+λ) search around the best at a fixed step, `HOLD=name=value,…`
+//! to keep gains of the searched vector at a value, e.g. `HOLD=stance_knee_bias=0`). It prints every new
 //! best as an `eval` string. One set: `gait_probe eval g0,g1,…` (`TRACE=1` per-step errors,
 //! `GIF=out.gif` [`GIF_PHASE`] a rollout, `STEER=gain GOAL_ANGLE=rad` steering toward a goal
 //! 3 m away at that angle, travel then counts the distance gained toward it). `SYNC_WAIT=n
@@ -146,6 +147,38 @@ impl Setup {
             Search::Stop => g.stop = StartRamp::from_array(std::array::from_fn(|i| v[i])),
         }
         g
+    }
+
+    /// The names of the search vector's entries, in order.
+    fn names(&self) -> Vec<&'static str> {
+        match self.search {
+            Search::Walk => BalanceGains::NAMES.to_vec(),
+            Search::Stand => StandGains::NAMES.to_vec(),
+            Search::Both => [&BalanceGains::NAMES[..], &StandGains::NAMES[..]].concat(),
+            Search::Start | Search::Stop => StartRamp::NAMES.to_vec(),
+        }
+    }
+
+    /// `HOLD=name=value,…`: search-vector entries the search keeps at a value (e.g.
+    /// `stance_knee_bias=0`: a base that does not straighten the stance knee). An unknown name is
+    /// refused with the list.
+    fn held(&self, text: &str) -> Result<Vec<(usize, f32)>, String> {
+        let names = self.names();
+        text.split(',')
+            .filter(|t| !t.is_empty())
+            .map(|item| {
+                let (name, value) = item
+                    .split_once('=')
+                    .ok_or_else(|| format!("HOLD: {item:?} is not name=value"))?;
+                let i = names.iter().position(|n| *n == name).ok_or_else(|| {
+                    format!("HOLD: no gain {name:?} in this search; its gains: {names:?}")
+                })?;
+                let v = value
+                    .parse()
+                    .map_err(|_| format!("HOLD: {value:?} ({name}) is not a number"))?;
+                Ok((i, v))
+            })
+            .collect()
     }
 
     fn vector(&self, g: &Gains) -> Vec<f32> {
@@ -605,7 +638,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         return Ok(());
     }
+    let held = setup.held(&std::env::var("HOLD").unwrap_or_default())?;
+    let hold = |v: &mut Vec<f32>| {
+        for &(i, x) in &held {
+            v[i] = x;
+        }
+    };
     let mut mean = parse(&std::env::var("START").unwrap_or_default())?;
+    hold(&mut mean);
     let mut sigma: f32 = std::env::var("SIGMA")
         .ok()
         .and_then(|v| v.parse().ok())
@@ -633,6 +673,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 for x in &mut c {
                     *x += sigma * rng.normal();
                 }
+                hold(&mut c);
                 c
             })
             .collect();
@@ -685,13 +726,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     println!("best gains (score {:.1}):", best.0);
-    let names: Vec<&str> = match setup.search {
-        Search::Walk => BalanceGains::NAMES.to_vec(),
-        Search::Stand => StandGains::NAMES.to_vec(),
-        Search::Both => [&BalanceGains::NAMES[..], &StandGains::NAMES[..]].concat(),
-        Search::Start | Search::Stop => StartRamp::NAMES.to_vec(),
-    };
-    for (n, g) in names.iter().zip(&best.1) {
+    for (n, g) in setup.names().iter().zip(&best.1) {
         println!("  {n} = {g:.3}");
     }
     for p in 0..setup.phases {
