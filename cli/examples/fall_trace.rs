@@ -141,7 +141,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let (angles, reference_angles) =
                         (joint_angles(&model, &now), reference.at(k).1);
                     // Hip pitch, knee and ankle pitch, each leg's and the reference's.
-                    let hips = [rig.hip_y, rig.knee, rig.ankle_y]
+                    let legs = [rig.hip_y, rig.knee, rig.ankle_y]
                         .iter()
                         .flat_map(|dofs| {
                             let (a, r) = (&angles, reference_angles);
@@ -172,7 +172,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         pushed(&env),
                         slip[0],
                         slip[1],
-                        hips
+                        legs
                     )));
                 }
                 if r.done || r.truncated || r.physics_invalid {
