@@ -25,7 +25,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let rig = Rig::new(&model).ok_or("the model lacks the AMP humanoid's legs")?;
     let n = reference.len();
     let mut root_fwd = 0.0f32;
-    let mut down = [0usize; 2];
     let mut down_fwd: [Vec<f32>; 2] = [Vec::new(), Vec::new()];
     let mut lowest = [f32::INFINITY; 2];
     println!("step,root_z,root_v_fwd,foot_z_0,foot_v_fwd_0,foot_z_1,foot_v_fwd_1");
@@ -41,7 +40,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let fv = heading.vector(f.linvel);
             lowest[i] = lowest[i].min(f.pos.z);
             if f.pos.z < CONTACT_HEIGHT {
-                down[i] += 1;
                 down_fwd[i].push(fv.x);
             }
             row += &format!(",{:.3},{:.3}", f.pos.z, fv.x);
@@ -59,7 +57,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let median = v.get(v.len() / 2).copied().unwrap_or(f32::NAN);
         eprintln!(
             "foot {i}: lowest origin {:.3} m; below {CONTACT_HEIGHT} m for {} of {n} steps; forward speed there mean {mean:.3}, median {median:.3} m/s",
-            lowest[i], down[i]
+            lowest[i],
+            v.len()
         );
     }
     Ok(())
