@@ -12,6 +12,7 @@
 //!
 //! Search: `gait_probe [ITERATIONS] [CLIP]` ((μ/μ, λ) ES from zeros, i.e. open-loop tracking;
 //! `START=default` or `START=g0,g1,…` (the order of `BalanceGains::NAMES`) to start elsewhere,
+//! `WALK=g0,…` (all 17, that order) the walk's gains when another vector is searched,
 //! `SIGMA`, `ELITIST=1` for a (1+λ) search around the best at a fixed step, `HOLD=name=value,…`
 //! to keep gains of the searched vector at a value, e.g. `HOLD=stance_knee_bias=0`). It prints every new
 //! best as an `eval` string. One set: `gait_probe eval g0,g1,…` (`TRACE=1` per-step errors,
@@ -482,6 +483,32 @@ fn score(s: &Setup, g: &[f32]) -> (f32, usize, f32) {
     (up as f32 + w * travel, up, travel)
 }
 
+/// `WALK=g0,g1,…`: all `BalanceGains::LEN` walking gains in `BalanceGains::NAMES` order; empty:
+/// `BalanceGains::default()`. A short list is refused rather than filled with zeros, which would
+/// silently be another base.
+fn walk_gains(text: &str) -> Result<BalanceGains, String> {
+    if text.is_empty() {
+        return Ok(BalanceGains::default());
+    }
+    let values = text
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f32>()
+                .map_err(|_| format!("WALK: {t:?} is not a number"))
+        })
+        .collect::<Result<Vec<f32>, String>>()?;
+    let array: [f32; BalanceGains::LEN] = values.as_slice().try_into().map_err(|_| {
+        format!(
+            "WALK: {} numbers, the walk has {} gains: {:?}",
+            values.len(),
+            BalanceGains::LEN,
+            BalanceGains::NAMES
+        )
+    })?;
+    Ok(BalanceGains::from_array(array))
+}
+
 /// A tiny deterministic generator (xorshift) with Box-Muller normals.
 struct Rng(u64);
 impl Rng {
@@ -568,7 +595,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             _ => Search::Walk,
         },
         fixed: Gains {
-            walk: BalanceGains::default(),
+            // `WALK=g0,g1,…` (`BalanceGains::NAMES` order): the walk's gains when they are not
+            // searched, e.g. to search the start ramp of another base (default: the defaults).
+            walk: walk_gains(&std::env::var("WALK").unwrap_or_default())?,
             stand: StandGains::default(),
             // `RAMP=seconds,feedback,…`: the start ramp when it is not searched.
             start: StartRamp::from_array(floats("RAMP")?),
