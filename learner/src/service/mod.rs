@@ -247,6 +247,35 @@ impl TrainConfig {
                     )));
                 }
             }
+            let mut until = 0;
+            for (i, stage) in g.start_stages.iter().enumerate() {
+                let at = format!("env.gait.start_stages[{i}]");
+                if stage.until_iteration <= until {
+                    return Err(ServiceError::Config(format!(
+                        "{at}.until_iteration must be above the stage before's ({until}), got {}",
+                        stage.until_iteration
+                    )));
+                }
+                until = stage.until_iteration;
+                for (name, f) in [
+                    ("near_start_fraction", stage.near_start_fraction),
+                    ("rest_start_fraction", stage.rest_start_fraction),
+                ] {
+                    if let Some(f) = f.filter(|f| !(0.0..=1.0).contains(f)) {
+                        return Err(ServiceError::Config(format!(
+                            "{at}.{name} must be between 0 and 1, got {f}"
+                        )));
+                    }
+                }
+                if let Some(x) = stage
+                    .start_distance_max
+                    .filter(|x| !(x.is_finite() && *x >= 0.0))
+                {
+                    return Err(ServiceError::Config(format!(
+                        "{at}.start_distance_max must be a finite number >= 0, got {x}"
+                    )));
+                }
+            }
             for (name, x) in [
                 ("bout_distance", g.bout_distance),
                 ("bout_min_left", g.bout_min_left),
@@ -1419,6 +1448,50 @@ mod tests {
                 if let Err(e) = result {
                     assert!(e.to_string().contains(&format!("env.gait.{name}")), "{e}");
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn start_stages_out_of_order_or_out_of_range_are_refused_by_name() {
+        use lhm_sim::env::StartStage;
+        let stage = |until: u64, rest: Option<f32>, max: Option<f32>| StartStage {
+            until_iteration: until,
+            rest_start_fraction: rest,
+            start_distance_max: max,
+            ..StartStage::default()
+        };
+        for (stages, refused) in [
+            (
+                vec![stage(10, Some(0.0), Some(0.0)), stage(20, None, None)],
+                None,
+            ),
+            (
+                vec![stage(0, None, None)],
+                Some("start_stages[0].until_iteration"),
+            ),
+            (
+                vec![stage(20, None, None), stage(20, None, None)],
+                Some("start_stages[1].until_iteration"),
+            ),
+            (
+                vec![stage(10, Some(1.5), None)],
+                Some("start_stages[0].rest_start_fraction"),
+            ),
+            (
+                vec![stage(10, None, None), stage(20, None, Some(f32::NAN))],
+                Some("start_stages[1].start_distance_max"),
+            ),
+        ] {
+            let mut config = TrainConfig::default();
+            config.env.gait = Some(lhm_sim::env::GaitConfig {
+                start_stages: stages,
+                ..Default::default()
+            });
+            match (config.check(), refused) {
+                (Ok(()), None) => {}
+                (Err(e), Some(name)) => assert!(e.to_string().contains(name), "{e}"),
+                (result, expected) => panic!("{expected:?}: {result:?}"),
             }
         }
     }
