@@ -241,11 +241,7 @@ impl TrainConfig {
                 ("near_start_fraction", g.near_start_fraction),
                 ("rest_start_fraction", g.rest_start_fraction),
             ] {
-                if !(0.0..=1.0).contains(&f) {
-                    return Err(ServiceError::Config(format!(
-                        "env.gait.{name} must be between 0 and 1, got {f}"
-                    )));
-                }
+                check_fraction("env.gait", name, f)?;
             }
             let mut until = 0;
             for (i, stage) in g.start_stages.iter().enumerate() {
@@ -261,31 +257,18 @@ impl TrainConfig {
                     ("near_start_fraction", stage.near_start_fraction),
                     ("rest_start_fraction", stage.rest_start_fraction),
                 ] {
-                    if let Some(f) = f.filter(|f| !(0.0..=1.0).contains(f)) {
-                        return Err(ServiceError::Config(format!(
-                            "{at}.{name} must be between 0 and 1, got {f}"
-                        )));
-                    }
+                    f.map_or(Ok(()), |f| check_fraction(&at, name, f))?;
                 }
-                if let Some(x) = stage
+                stage
                     .start_distance_max
-                    .filter(|x| !(x.is_finite() && *x >= 0.0))
-                {
-                    return Err(ServiceError::Config(format!(
-                        "{at}.start_distance_max must be a finite number >= 0, got {x}"
-                    )));
-                }
+                    .map_or(Ok(()), |x| check_non_negative(&at, "start_distance_max", x))?;
             }
             for (name, x) in [
                 ("bout_distance", g.bout_distance),
                 ("bout_min_left", g.bout_min_left),
                 ("pause_seconds", g.pause_seconds),
             ] {
-                if !(x.is_finite() && x >= 0.0) {
-                    return Err(ServiceError::Config(format!(
-                        "env.gait.{name} must be a finite number >= 0, got {x}"
-                    )));
-                }
+                check_non_negative("env.gait", name, x)?;
             }
         }
         if self.role == "vla" {
@@ -720,6 +703,28 @@ fn serve_teacher(
         key,
         bytes,
     })
+}
+
+/// `{at}.{name}` refused unless it lies in [0, 1].
+fn check_fraction(at: &str, name: &str, f: f32) -> Result<(), ServiceError> {
+    if (0.0..=1.0).contains(&f) {
+        Ok(())
+    } else {
+        Err(ServiceError::Config(format!(
+            "{at}.{name} must be between 0 and 1, got {f}"
+        )))
+    }
+}
+
+/// `{at}.{name}` refused unless it is a finite number >= 0.
+fn check_non_negative(at: &str, name: &str, x: f32) -> Result<(), ServiceError> {
+    if x.is_finite() && x >= 0.0 {
+        Ok(())
+    } else {
+        Err(ServiceError::Config(format!(
+            "{at}.{name} must be a finite number >= 0, got {x}"
+        )))
+    }
 }
 
 pub fn checkpoint_stem(run_dir: &Path) -> PathBuf {
