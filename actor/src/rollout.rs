@@ -520,10 +520,8 @@ impl Rollout {
             let step = rng.below(gait.len());
             let noise = (2.0 * rng.next_f64() as f32 - 1.0) * self.spec.env.demo_start_yaw_noise;
             let yaw = env.yaw_toward_way() + noise;
-            // The run's start curriculum (`[[env.gait.start_stages]]`) follows the policy version
-            // the actors act with, as the assist's fade does.
-            let version = self.policy_version;
-            let mix = self.spec.env.gait.as_ref().map(|g| g.start_mix_at(version));
+            // A run's `[[stages]]` reach these settings through the spec of each version.
+            let mix = self.spec.env.gait.as_ref().map(|g| g.start_mix());
             match draw_gait_start(mix, || env.way_length(), rng) {
                 GaitStartDraw::Rest => {
                     env.start_at_rest_in_gait(Arc::clone(gait), step, yaw);
@@ -840,7 +838,7 @@ mod tests {
         let g = gait(0.5, 1.0, 5.0);
         let mut rng = SplitMix64::new(11);
         let draws: Vec<GaitStartDraw> = (0..4000)
-            .map(|_| draw_gait_start(Some(g.start_mix_at(0)), || 3.0, &mut rng))
+            .map(|_| draw_gait_start(Some(g.start_mix()), || 3.0, &mut rng))
             .collect();
         let rest = draws.iter().filter(|d| **d == GaitStartDraw::Rest).count();
         let on_way: Vec<f32> = draws
@@ -869,11 +867,11 @@ mod tests {
         let mut rng = SplitMix64::new(3);
         let g = gait(0.0, 1.0, 5.0);
         assert_eq!(
-            draw_gait_start(Some(g.start_mix_at(0)), || 1.0, &mut rng),
+            draw_gait_start(Some(g.start_mix()), || 1.0, &mut rng),
             GaitStartDraw::Walking { near: true }
         );
         for _ in 0..200 {
-            match draw_gait_start(Some(g.start_mix_at(0)), || 9.0, &mut rng) {
+            match draw_gait_start(Some(g.start_mix()), || 9.0, &mut rng) {
                 GaitStartDraw::OnWay(d) => assert!((1.2..=5.0).contains(&d), "{d}"),
                 other => panic!("{other:?}"),
             }
@@ -881,61 +879,9 @@ mod tests {
         // near_start_fraction 0: every walking start at the task's start.
         let g = gait(0.0, 0.0, 5.0);
         assert_eq!(
-            draw_gait_start(Some(g.start_mix_at(0)), || 9.0, &mut rng),
+            draw_gait_start(Some(g.start_mix()), || 9.0, &mut rng),
             GaitStartDraw::Walking { near: false }
         );
-    }
-
-    #[test]
-    fn start_stages_set_the_draws_by_policy_version_and_the_runs_own_follow() {
-        use lhm_sim::env::StartStage;
-        let mut g = gait(0.5, 1.0, 5.0);
-        g.start_stages = vec![
-            // Walking starts 1.2 m before the object only.
-            StartStage {
-                until_iteration: 100,
-                rest_start_fraction: Some(0.0),
-                start_distance_max: Some(0.0),
-                ..StartStage::default()
-            },
-            // Every start at rest.
-            StartStage {
-                until_iteration: 200,
-                rest_start_fraction: Some(1.0),
-                ..StartStage::default()
-            },
-        ];
-        let mut rng = SplitMix64::new(17);
-        let mut draw = |version: u64| -> Vec<GaitStartDraw> {
-            (0..400)
-                .map(|_| draw_gait_start(Some(g.start_mix_at(version)), || 4.0, &mut rng))
-                .collect()
-        };
-        for version in [0, 99] {
-            let draws = draw(version);
-            assert!(
-                draws
-                    .iter()
-                    .all(|d| *d == GaitStartDraw::Walking { near: true }),
-                "version {version}: {draws:?}"
-            );
-        }
-        for version in [100, 199] {
-            assert!(draw(version).iter().all(|d| *d == GaitStartDraw::Rest));
-        }
-        for version in [200, 1_000_000] {
-            let draws = draw(version);
-            let rest = draws.iter().filter(|d| **d == GaitStartDraw::Rest).count();
-            let on_way = draws
-                .iter()
-                .filter(|d| matches!(d, GaitStartDraw::OnWay(x) if (1.2..=4.0).contains(x)))
-                .count();
-            assert!(
-                (150..250).contains(&rest),
-                "version {version}: {rest} at rest"
-            );
-            assert_eq!(rest + on_way, draws.len(), "version {version}");
-        }
     }
 
     #[test]
@@ -945,11 +891,7 @@ mod tests {
         let mut rng = SplitMix64::new(5);
         let before = rng.state();
         let g = gait(0.0, 1.0, 0.0);
-        let draw = draw_gait_start(
-            Some(g.start_mix_at(0)),
-            || panic!("way length asked"),
-            &mut rng,
-        );
+        let draw = draw_gait_start(Some(g.start_mix()), || panic!("way length asked"), &mut rng);
         assert_eq!(draw, GaitStartDraw::Walking { near: true });
         let none = draw_gait_start(None, || panic!("way length asked"), &mut rng);
         assert_eq!(none, GaitStartDraw::Walking { near: false });

@@ -106,6 +106,9 @@ impl LearnerOpts {
         }
         if self.no_amp {
             config.amp_enabled = false;
+            for stage in &mut config.stages {
+                stage.amp_enabled = None;
+            }
         }
         if let Some(path) = &self.init_from {
             config.init_from = Some(path.clone());
@@ -149,7 +152,7 @@ pub(crate) fn demo_for(
     motion_dir: Option<PathBuf>,
     config: &TrainConfig,
 ) -> Result<Option<Box<dyn DemoSource>>> {
-    if !config.amp_enabled {
+    if !config.amp_present() {
         return Ok(None);
     }
     crate::demo::load(motion_dir, config).map(Some)

@@ -129,6 +129,14 @@ impl ActorCritic {
             .collect()
     }
 
+    /// Sets the policy's fixed log standard deviation, in the network and in its config (what
+    /// a saved policy records); an error for a learned one.
+    pub fn set_fixed_log_std(&mut self, value: f32) -> NetResult<()> {
+        self.policy.set_fixed_log_std(value)?;
+        self.config.policy.log_std = crate::LogStd::Fixed(value);
+        Ok(())
+    }
+
     pub fn obs_dim(&self) -> usize {
         self.policy.obs_dim()
     }

@@ -138,6 +138,20 @@ impl GaussianPolicy {
         Ok(quad.broadcast_sub(&norm)?)
     }
 
+    /// Replaces a fixed log standard deviation (a run's stage may change it); a learned one is
+    /// a parameter of the optimiser and is refused.
+    pub fn set_fixed_log_std(&mut self, value: f32) -> NetResult<()> {
+        match &mut self.log_std {
+            LogStdParam::Fixed(t) => {
+                *t = Tensor::full(value, t.dims1()?, t.device())?.to_dtype(t.dtype())?;
+                Ok(())
+            }
+            LogStdParam::Learned(_) => Err(NetError::Config(
+                "the policy's log_std is learned; only a fixed one can be set".into(),
+            )),
+        }
+    }
+
     /// log π(a | s), [B].
     pub fn log_prob(&self, obs: &Tensor, actions: &Tensor) -> NetResult<Tensor> {
         self.log_prob_from_mean(&self.mean(obs)?, actions)
@@ -249,6 +263,30 @@ impl Discriminator {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_fixed_log_std_can_be_set_and_a_learned_one_cannot() {
+        let mut rng = SplitMix64::new(1);
+        let cfg = |log_std| GaussianPolicyConfig {
+            mlp: MlpConfig::with_hidden(&[8]),
+            log_std,
+            output_init_scale: 0.01,
+            vla: None,
+        };
+        let mut fixed =
+            GaussianPolicy::new(3, 2, &cfg(LogStd::Fixed(-3.5)), &mut rng, DType::F32).unwrap();
+        fixed.set_fixed_log_std(-4.0).unwrap();
+        let set: Vec<f32> = fixed.log_std().to_vec1().unwrap();
+        assert_eq!(set, vec![-4.0, -4.0]);
+        let h: f32 = fixed.entropy().unwrap().to_scalar().unwrap();
+        let want = 2.0 * (0.5 + HALF_LN_TWO_PI as f32 - 4.0);
+        assert!((h - want).abs() < 1e-5, "{h} vs {want}");
+        let mut learned =
+            GaussianPolicy::new(3, 2, &cfg(LogStd::Learned(-1.0)), &mut rng, DType::F32).unwrap();
+        assert!(learned.set_fixed_log_std(-4.0).is_err());
+        let kept: Vec<f32> = learned.log_std().to_vec1().unwrap();
+        assert_eq!(kept, vec![-1.0, -1.0]);
+    }
 
     #[test]
     fn log_prob_and_entropy_match_closed_form() {

@@ -192,14 +192,6 @@ pub struct GaitConfig {
     /// the task asks. Drawn before `near_start_fraction`; 0: never (`lhm eval --from-rest` and
     /// `render-rollout --from-rest` start every episode so).
     pub rest_start_fraction: f32,
-    /// `[[env.gait.start_stages]]`: a curriculum of starts over training iterations. While the
-    /// actors act with a policy version below a stage's `until_iteration` (the first such stage),
-    /// its start settings replace the ones above; past the last stage the ones above hold. A run
-    /// from scratch can so practise the stop from walking starts near the object before the
-    /// long walks from rest, as the fine-tune line learnt them in stages (RESULTS.md, eighteenth
-    /// to twenty-sixth sessions). Empty (the default): the same starts throughout. `lhm eval` and
-    /// `render-rollout` ignore it.
-    pub start_stages: Vec<StartStage>,
     /// Keep the cycle in time with the character's footfalls ([`GaitReference::advance`]): wait
     /// at most `sync_wait` steps for a swing foot that lands late, jump up to `sync_skip` steps to
     /// the reference's footfall when it lands early — while walking (not during the start ramp
@@ -228,19 +220,7 @@ pub struct GaitConfig {
     pub stop: StartRamp,
 }
 
-/// One stage of [`GaitConfig::start_stages`]: the start settings it changes, each `None` to keep
-/// the run's own.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct StartStage {
-    /// The stage holds while the policy version (the learner's iteration) is below this.
-    pub until_iteration: u64,
-    pub rest_start_fraction: Option<f32>,
-    pub near_start_fraction: Option<f32>,
-    pub start_distance_max: Option<f32>,
-}
-
-/// The start settings an episode is drawn with ([`GaitConfig::start_mix_at`]).
+/// The start settings an episode is drawn with ([`GaitConfig::start_mix`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StartMix {
     pub rest_start_fraction: f32,
@@ -250,27 +230,13 @@ pub struct StartMix {
 }
 
 impl GaitConfig {
-    /// The start settings at policy version `iteration`: the first stage of `start_stages` whose
-    /// `until_iteration` lies above it laid over the run's own, or the run's own past them all.
-    pub fn start_mix_at(&self, iteration: u64) -> StartMix {
-        let own = StartMix {
+    /// The start settings episodes are drawn with.
+    pub fn start_mix(&self) -> StartMix {
+        StartMix {
             rest_start_fraction: self.rest_start_fraction,
             near_start_fraction: self.near_start_fraction,
             start_distance: self.start_distance,
             start_distance_max: self.start_distance_max,
-        };
-        match self
-            .start_stages
-            .iter()
-            .find(|s| iteration < s.until_iteration)
-        {
-            None => own,
-            Some(s) => StartMix {
-                rest_start_fraction: s.rest_start_fraction.unwrap_or(own.rest_start_fraction),
-                near_start_fraction: s.near_start_fraction.unwrap_or(own.near_start_fraction),
-                start_distance_max: s.start_distance_max.unwrap_or(own.start_distance_max),
-                ..own
-            },
         }
     }
 }
@@ -296,7 +262,6 @@ impl Default for GaitConfig {
             // validator's disc) brushes objects, 0.45 m passes them.
             route_clearance: 0.45,
             rest_start_fraction: 0.0,
-            start_stages: Vec::new(),
             sync_wait: 0,
             sync_skip: 0,
             bout_distance: 0.0,

@@ -81,6 +81,45 @@ pub struct TrainConfig {
     /// See `RunSpec::chunk_sets_per_version` (0: actors run free). `lhm train` sets it from
     /// its actor and environment counts so that one version's sets make one batch.
     pub chunk_sets_per_version: u32,
+    /// `[[stages]]`: a schedule over the learner's iterations ([`RunStage`]). Empty (the
+    /// default): the settings above throughout.
+    pub stages: Vec<RunStage>,
+}
+
+/// One stage of a run's schedule (`[[stages]]`): settings that hold while the learner's iteration
+/// is below `until_iteration` (the first such stage holds); past the last stage the run's own.
+/// A run from scratch can so learn in the order the fine-tune line of RESULTS.md did through
+/// `--init-from` runs — a walk from rest without the discriminator at more noise first, then
+/// the stop, the long walks and the discriminator — in one run. The actors follow: the stage's
+/// environment and noise travel in the run spec with the weights of each version.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunStage {
+    pub until_iteration: u64,
+    /// `false`: PPO on the task reward alone while the stage holds (no style reward, no
+    /// discriminator update); `true`: AMP on. The discriminator, its features and demo exist for
+    /// the whole run when any part of it uses AMP (it starts learning where AMP is first on).
+    pub amp_enabled: Option<bool>,
+    /// The policy's fixed log standard deviation while the stage holds (the run's
+    /// `[network.policy] log_std` must be fixed too).
+    pub log_std: Option<f32>,
+    /// Keys laid over the run's `[env]` while the stage holds, key by key
+    /// (`[stages.env.gait] rest_start_fraction = 1.0`); the observation and AMP feature widths
+    /// must stay the run's.
+    pub env: toml::Table,
+}
+
+/// What a run's schedule sets at one iteration ([`TrainConfig::stage_at`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StageSettings {
+    /// The stage in `stages` that holds; `None` past the last (the run's own settings).
+    pub index: Option<usize>,
+    /// Whether the style reward counts and the discriminator learns.
+    pub amp_active: bool,
+    /// The policy's fixed log standard deviation (`None`: a learned one, left alone).
+    pub log_std: Option<f32>,
+    /// What the actors receive with the weights: the stage's environment and noise.
+    pub spec: RunSpec,
 }
 
 impl Default for TrainConfig {
@@ -164,6 +203,7 @@ impl Default for TrainConfig {
             chunk_steps: 32,
             record_every_episodes: 20,
             chunk_sets_per_version: 0,
+            stages: Vec::new(),
         }
     }
 }
@@ -194,7 +234,7 @@ impl TrainConfig {
                 .as_ref()
                 .map_or(TaskEnv::obs_dim(&model, &self.env), |v| v.obs_dim()),
             act_dim: model.dofs.len(),
-            amp_dim: if self.amp_enabled {
+            amp_dim: if self.amp_present() {
                 TaskEnv::amp_dim(&model, &self.env)
             } else {
                 0
@@ -202,7 +242,7 @@ impl TrainConfig {
             actor_critic: self.network.clone(),
             // Demo starts need the clips AMP uses: without AMP there are none to start from.
             env: EnvConfig {
-                demo_start_probability: if self.amp_enabled {
+                demo_start_probability: if self.amp_present() {
                     self.env.demo_start_probability
                 } else {
                     0.0
@@ -216,6 +256,98 @@ impl TrainConfig {
             chunk_sets_per_version: self.chunk_sets_per_version,
             teacher_mix: 0.0,
         }
+    }
+
+    /// Whether any part of the run uses AMP (its own settings or a stage's): the discriminator,
+    /// the actors' AMP features and the demo exist for the whole run then.
+    pub fn amp_present(&self) -> bool {
+        self.amp_enabled || self.stages.iter().any(|s| s.amp_enabled == Some(true))
+    }
+
+    /// The stage of `stages` that holds at learner iteration `iteration` (`None`: past them all).
+    pub fn stage_index(&self, iteration: u64) -> Option<usize> {
+        self.stages
+            .iter()
+            .position(|s| iteration < s.until_iteration)
+    }
+
+    /// The schedule's settings at learner iteration `iteration` (policy version): the first
+    /// stage whose `until_iteration` lies above it laid over the run's own, or the run's own.
+    /// Errors name the stage and the field (`check` has tried every stage already).
+    pub fn stage_at(&self, iteration: u64) -> Result<StageSettings, ServiceError> {
+        let index = self.stage_index(iteration);
+        let own_log_std = match self.network.policy.log_std {
+            lhm_nets::LogStd::Fixed(v) => Some(v),
+            lhm_nets::LogStd::Learned(_) => None,
+        };
+        let mut spec = self.run_spec();
+        let Some(i) = index else {
+            return Ok(StageSettings {
+                index,
+                amp_active: self.amp_enabled,
+                log_std: own_log_std,
+                spec,
+            });
+        };
+        let stage = &self.stages[i];
+        let at = format!("stages[{i}]");
+        let log_std = match (stage.log_std, own_log_std) {
+            (None, own) => own,
+            (Some(v), Some(_)) if v.is_finite() => Some(v),
+            (Some(v), Some(_)) => {
+                return Err(ServiceError::Config(format!(
+                    "{at}.log_std must be a finite number, got {v}"
+                )))
+            }
+            (Some(_), None) => {
+                return Err(ServiceError::Config(format!(
+                    "{at}.log_std: the run's [network.policy] log_std is learned; a stage can \
+                     only set a fixed one"
+                )))
+            }
+        };
+        if let Some(v) = log_std {
+            spec.actor_critic.policy.log_std = lhm_nets::LogStd::Fixed(v);
+        }
+        if !stage.env.is_empty() {
+            let mut env = toml::Table::try_from(&self.env)
+                .map_err(|e| ServiceError::Config(format!("the run's [env]: {e}")))?;
+            overlay(&mut env, stage.env.clone());
+            let staged: EnvConfig = serde_path_to_error::deserialize(toml::Value::Table(env))
+                .map_err(|e| {
+                    ServiceError::Config(format!("{at}.env: field `{}`: {}", e.path(), e.inner()))
+                })?;
+            let model = CharacterModel::amp_humanoid();
+            for (what, own, theirs) in [
+                (
+                    "observations",
+                    TaskEnv::obs_dim(&model, &self.env),
+                    TaskEnv::obs_dim(&model, &staged),
+                ),
+                (
+                    "AMP features",
+                    TaskEnv::amp_dim(&model, &self.env),
+                    TaskEnv::amp_dim(&model, &staged),
+                ),
+            ] {
+                if own != theirs {
+                    return Err(ServiceError::Config(format!(
+                        "{at}.env gives {theirs} {what} per step where the run's [env] gives \
+                         {own}: a stage cannot change the networks' widths"
+                    )));
+                }
+            }
+            spec.env = EnvConfig {
+                demo_start_probability: spec.env.demo_start_probability,
+                ..staged
+            };
+        }
+        Ok(StageSettings {
+            index,
+            amp_active: stage.amp_enabled.unwrap_or(self.amp_enabled),
+            log_std,
+            spec,
+        })
     }
 
     /// Counts that must be positive (a 0 was silently treated as 1 before).
@@ -236,40 +368,18 @@ impl TrainConfig {
             .demo_weights
             .check()
             .map_err(|e| ServiceError::Config(format!("amp.demo_weights: {e}")))?;
-        if let Some(g) = self.env.gait.as_ref() {
-            for (name, f) in [
-                ("near_start_fraction", g.near_start_fraction),
-                ("rest_start_fraction", g.rest_start_fraction),
-            ] {
-                check_fraction("env.gait", name, f)?;
+        check_env("env", &self.env)?;
+        let mut until = 0;
+        for (i, stage) in self.stages.iter().enumerate() {
+            if stage.until_iteration <= until {
+                return Err(ServiceError::Config(format!(
+                    "stages[{i}].until_iteration must be above the stage before's ({until}), got {}",
+                    stage.until_iteration
+                )));
             }
-            let mut until = 0;
-            for (i, stage) in g.start_stages.iter().enumerate() {
-                let at = format!("env.gait.start_stages[{i}]");
-                if stage.until_iteration <= until {
-                    return Err(ServiceError::Config(format!(
-                        "{at}.until_iteration must be above the stage before's ({until}), got {}",
-                        stage.until_iteration
-                    )));
-                }
-                until = stage.until_iteration;
-                for (name, f) in [
-                    ("near_start_fraction", stage.near_start_fraction),
-                    ("rest_start_fraction", stage.rest_start_fraction),
-                ] {
-                    f.map_or(Ok(()), |f| check_fraction(&at, name, f))?;
-                }
-                stage
-                    .start_distance_max
-                    .map_or(Ok(()), |x| check_non_negative(&at, "start_distance_max", x))?;
-            }
-            for (name, x) in [
-                ("bout_distance", g.bout_distance),
-                ("bout_min_left", g.bout_min_left),
-                ("pause_seconds", g.pause_seconds),
-            ] {
-                check_non_negative("env.gait", name, x)?;
-            }
+            until = stage.until_iteration;
+            let settings = self.stage_at(stage.until_iteration - 1)?;
+            check_env(&format!("stages[{i}].env"), &settings.spec.env)?;
         }
         if self.role == "vla" {
             let vla = self.network.policy.vla.as_ref().ok_or_else(|| {
@@ -287,7 +397,7 @@ impl TrainConfig {
             )));
         }
         if self.role == "student" || self.role == "vla" {
-            if self.amp_enabled {
+            if self.amp_present() {
                 return Err(ServiceError::Config(
                     "a student run learns by regression onto its teachers' actions: set \
                      amp_enabled = false (the stage preset does)"
@@ -323,7 +433,7 @@ impl TrainConfig {
             act_dim: spec.act_dim,
             actor_critic: self.network.clone(),
             ppo: self.ppo.clone(),
-            amp: self.amp_enabled.then(|| AmpSetup {
+            amp: self.amp_present().then(|| AmpSetup {
                 config: self.amp.clone(),
                 feature_dim: spec.amp_dim,
             }),
@@ -705,6 +815,29 @@ fn serve_teacher(
     })
 }
 
+/// The environment's own settings that its types do not bound (`at`: where they came from).
+fn check_env(at: &str, env: &EnvConfig) -> Result<(), ServiceError> {
+    let Some(g) = env.gait.as_ref() else {
+        return Ok(());
+    };
+    let at = format!("{at}.gait");
+    for (name, f) in [
+        ("near_start_fraction", g.near_start_fraction),
+        ("rest_start_fraction", g.rest_start_fraction),
+    ] {
+        check_fraction(&at, name, f)?;
+    }
+    for (name, x) in [
+        ("start_distance_max", g.start_distance_max),
+        ("bout_distance", g.bout_distance),
+        ("bout_min_left", g.bout_min_left),
+        ("pause_seconds", g.pause_seconds),
+    ] {
+        check_non_negative(&at, name, x)?;
+    }
+    Ok(())
+}
+
 /// `{at}.{name}` refused unless it lies in [0, 1].
 fn check_fraction(at: &str, name: &str, f: f32) -> Result<(), ServiceError> {
     if (0.0..=1.0).contains(&f) {
@@ -864,6 +997,30 @@ fn open_learner(
     }
 }
 
+/// The schedule's settings at the learner's iteration, its policy's noise set to them; logged.
+fn enter_stage(config: &TrainConfig, learner: &mut Learner) -> Result<StageSettings, ServiceError> {
+    let it = learner.counters.iteration;
+    let stage = config.stage_at(it)?;
+    if let Some(v) = stage.log_std {
+        learner
+            .actor_critic
+            .set_fixed_log_std(v)
+            .map_err(crate::LearnerError::from)?;
+    }
+    if !config.stages.is_empty() {
+        let name = stage.index.map_or_else(
+            || "the run's own settings".to_owned(),
+            |i| format!("stages[{i}]"),
+        );
+        tracing::info!(
+            "iteration {it}: {name} (AMP {}, log_std {:?})",
+            if stage.amp_active { "on" } else { "off" },
+            stage.log_std
+        );
+    }
+    Ok(stage)
+}
+
 /// Runs the learner until `max_iterations` or a stop request; returns the final status.
 pub fn run_learner(
     config: &TrainConfig,
@@ -875,7 +1032,7 @@ pub fn run_learner(
     config.check()?;
     keys::check_chunk("run id", &config.run_id).map_err(lhm_cluster::ClusterError::from)?;
     let teachers = load_teachers(config, role)?;
-    if config.amp_enabled && demo.is_none() {
+    if config.amp_present() && demo.is_none() {
         return Err(ServiceError::Config(
             "AMP is on but no demo motion was given (install clips with scripts/install-motions, \
              or train without AMP)"
@@ -889,7 +1046,8 @@ pub fn run_learner(
         Role::Student | Role::Vla => Optimiser::dagger(&config.dagger, &learner, &run_dir)?,
         _ => Optimiser::PpoAmp { demo },
     };
-    let mut spec = config.run_spec();
+    let mut stage = enter_stage(config, &mut learner)?;
+    let mut spec = stage.spec.clone();
     spec.teacher_mix = optimiser.teacher_mix(learner.counters.iteration);
 
     let encode = |learner: &Learner, spec: &RunSpec| -> Result<Vec<u8>, ServiceError> {
@@ -1013,8 +1171,12 @@ pub fn run_learner(
                 r.write_wire("/lhm/trajectory", lhm_cluster::clock::unix_ns(), first)
             });
         }
-        let update = optimiser.update(&mut learner, &chunks)?;
+        let update = optimiser.update(&mut learner, &chunks, stage.amp_active)?;
         learner.counters.iteration += 1;
+        if config.stage_index(learner.counters.iteration) != stage.index {
+            stage = enter_stage(config, &mut learner)?;
+            spec = stage.spec.clone();
+        }
         spec.teacher_mix = optimiser.teacher_mix(learner.counters.iteration);
         learner.counters.samples += n_steps as u64;
         book.steps_used += n_steps as u64;
@@ -1457,48 +1619,143 @@ mod tests {
         }
     }
 
+    const STAGED: &str = r#"
+run_id = "staged"
+amp_enabled = true
+[network.policy]
+log_std = { fixed = -4.0 }
+[env.gait]
+stop_distance = 0.7
+stop_on = "feet-down"
+start_distance = 1.2
+start_distance_max = 5.0
+rest_start_fraction = 0.5
+
+[[stages]]
+until_iteration = 100
+amp_enabled = false
+log_std = -3.5
+[stages.env.gait]
+rest_start_fraction = 1.0
+stop_on = "distance"
+
+[[stages]]
+until_iteration = 200
+[stages.env.gait]
+start_distance_max = 0.0
+"#;
+
     #[test]
-    fn start_stages_out_of_order_or_out_of_range_are_refused_by_name() {
-        use lhm_sim::env::StartStage;
-        let stage = |until: u64, rest: Option<f32>, max: Option<f32>| StartStage {
-            until_iteration: until,
-            rest_start_fraction: rest,
-            start_distance_max: max,
-            ..StartStage::default()
-        };
+    fn stages_set_noise_amp_and_env_by_iteration_and_the_runs_own_follow() {
+        use lhm_sim::env::StopOn;
+        let config = parse(STAGED).unwrap();
+        config.check().unwrap();
+        let own = config.run_spec();
+        assert!(own.amp_dim > 0);
+        let gait = |s: &StageSettings| s.spec.env.gait.clone().unwrap();
+        for it in [0, 99] {
+            let s = config.stage_at(it).unwrap();
+            assert_eq!(s.index, Some(0));
+            assert!(!s.amp_active);
+            assert_eq!(s.log_std, Some(-3.5));
+            assert_eq!(
+                s.spec.actor_critic.policy.log_std,
+                lhm_nets::LogStd::Fixed(-3.5)
+            );
+            // The stage's keys, the run's others; the widths stay the run's.
+            assert_eq!(gait(&s).rest_start_fraction, 1.0);
+            assert_eq!(gait(&s).stop_on, StopOn::Distance);
+            assert_eq!(gait(&s).stop_distance, 0.7);
+            assert_eq!(gait(&s).start_distance_max, 5.0);
+            assert_eq!((s.spec.obs_dim, s.spec.amp_dim), (own.obs_dim, own.amp_dim));
+        }
+        let s = config.stage_at(150).unwrap();
+        assert_eq!(s.index, Some(1));
+        assert!(s.amp_active);
+        assert_eq!(s.log_std, Some(-4.0));
+        assert_eq!(gait(&s).rest_start_fraction, 0.5);
+        assert_eq!(gait(&s).stop_on, StopOn::FeetDown);
+        assert_eq!(gait(&s).start_distance_max, 0.0);
+        for it in [200, 1_000_000] {
+            let s = config.stage_at(it).unwrap();
+            assert_eq!(s.index, None);
+            assert!(s.amp_active);
+            assert_eq!(s.spec, own);
+        }
+        // The run directory's config.toml keeps the schedule.
+        let dir = std::env::temp_dir().join(format!("lhm-staged-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = config.write_run_config(&dir).unwrap();
+        assert_eq!(TrainConfig::from_toml_file(&path).unwrap(), config);
+        let _ = std::fs::remove_dir_all(&dir);
+        // A run whose AMP is on only in a stage still has the discriminator throughout.
+        let late = parse(
+            "amp_enabled = false\n[[stages]]\nuntil_iteration = 5\n\
+             [[stages]]\nuntil_iteration = 9\namp_enabled = true\n",
+        )
+        .unwrap();
+        assert!(late.amp_present() && late.learner_config().amp.is_some());
+        assert!(!late.stage_at(0).unwrap().amp_active);
+        assert!(late.stage_at(5).unwrap().amp_active);
+        assert!(!late.stage_at(9).unwrap().amp_active);
+        assert!(late.run_spec().amp_dim > 0);
+    }
+
+    #[test]
+    fn stages_out_of_order_or_out_of_range_are_refused_by_name() {
+        let head =
+            "[network.policy]\nlog_std = { fixed = -4.0 }\n[env.gait]\nstop_distance = 0.7\n";
         for (stages, refused) in [
             (
-                vec![stage(10, Some(0.0), Some(0.0)), stage(20, None, None)],
-                None,
+                "[[stages]]\nuntil_iteration = 0\n",
+                "stages[0].until_iteration",
             ),
             (
-                vec![stage(0, None, None)],
-                Some("start_stages[0].until_iteration"),
+                "[[stages]]\nuntil_iteration = 20\n[[stages]]\nuntil_iteration = 20\n",
+                "stages[1].until_iteration",
             ),
             (
-                vec![stage(20, None, None), stage(20, None, None)],
-                Some("start_stages[1].until_iteration"),
+                "[[stages]]\nuntil_iteration = 10\n[stages.env.gait]\nrest_start_fraction = 1.5\n",
+                "stages[0].env.gait.rest_start_fraction",
             ),
             (
-                vec![stage(10, Some(1.5), None)],
-                Some("start_stages[0].rest_start_fraction"),
+                "[[stages]]\nuntil_iteration = 10\n[[stages]]\nuntil_iteration = 20\n\
+                 [stages.env.gait]\nstart_distance_max = -1.0\n",
+                "stages[1].env.gait.start_distance_max",
             ),
             (
-                vec![stage(10, None, None), stage(20, None, Some(f32::NAN))],
-                Some("start_stages[1].start_distance_max"),
+                "[[stages]]\nuntil_iteration = 10\n[stages.env]\nno_such_key = 1\n",
+                "stages[0].env: field `no_such_key`",
+            ),
+            (
+                "[[stages]]\nuntil_iteration = 10\n[stages.env]\nmap_cells = 3\n",
+                "stages[0].env gives",
+            ),
+            (
+                "[[stages]]\nuntil_iteration = 10\nlog_std = nan\n",
+                "stages[0].log_std",
+            ),
+            (
+                "[[stages]]\nuntil_iteration = 10\nno_such_key = 1\n",
+                "no_such_key",
             ),
         ] {
-            let mut config = TrainConfig::default();
-            config.env.gait = Some(lhm_sim::env::GaitConfig {
-                start_stages: stages,
-                ..Default::default()
-            });
-            match (config.check(), refused) {
-                (Ok(()), None) => {}
-                (Err(e), Some(name)) => assert!(e.to_string().contains(name), "{e}"),
-                (result, expected) => panic!("{expected:?}: {result:?}"),
+            let result = parse(&format!("{head}{stages}")).and_then(|c| c.check());
+            match result {
+                Err(e) => assert!(e.to_string().contains(refused), "{refused}: {e}"),
+                Ok(()) => panic!("{refused}: accepted"),
             }
         }
+        let learned = parse(
+            "[network.policy]\nlog_std = { learned = -1.0 }\n\
+             [[stages]]\nuntil_iteration = 10\nlog_std = -3.5\n",
+        )
+        .unwrap();
+        let e = learned.check().unwrap_err().to_string();
+        assert!(
+            e.contains("stages[0].log_std") && e.contains("learned"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -89,13 +89,16 @@ impl Optimiser {
         }
     }
 
+    /// One update on `chunks`; `amp_active` false leaves the style reward out and the
+    /// discriminator untouched (a run's stage without AMP).
     pub fn update(
         &mut self,
         learner: &mut Learner,
         chunks: &[TrajectoryChunk],
+        amp_active: bool,
     ) -> Result<Update, ServiceError> {
         match self {
-            Self::PpoAmp { demo } => ppo_amp(learner, demo.as_mut(), chunks),
+            Self::PpoAmp { demo } => ppo_amp(learner, demo.as_mut().filter(|_| amp_active), chunks),
             Self::Dagger(d) => {
                 let DaggerRounds {
                     config,
@@ -143,7 +146,9 @@ fn ppo_amp(
         gamma: learner.config.ppo.gamma,
         lambda: learner.config.ppo.lambda,
     };
-    let assembled = assemble(chunks, learner.amp.as_ref(), gae)?;
+    // Without the demo (a stage without AMP) the task reward alone.
+    let amp = learner.amp.as_ref().filter(|_| demo.is_some());
+    let assembled = assemble(chunks, amp, gae)?;
     let ppo = learner
         .ppo
         .update(&mut learner.actor_critic, &assembled.batch)?;
