@@ -1746,11 +1746,10 @@ start_distance_max = 0.0
                 Ok(()) => panic!("{refused}: accepted"),
             }
         }
-        let learned = parse(
-            "[network.policy]\nlog_std = { learned = -1.0 }\n\
-             [[stages]]\nuntil_iteration = 10\nlog_std = -3.5\n",
-        )
-        .unwrap();
+        // (Set in code: a file's `{ learned = .. }` is laid key by key over the default's
+        // `{ fixed = .. }` and names both variants.)
+        let mut learned = parse("[[stages]]\nuntil_iteration = 10\nlog_std = -3.5\n").unwrap();
+        learned.network.policy.log_std = lhm_nets::LogStd::Learned(-1.0);
         let e = learned.check().unwrap_err().to_string();
         assert!(
             e.contains("stages[0].log_std") && e.contains("learned"),
