@@ -254,7 +254,7 @@ enum GaitStartDraw {
 /// longer. A setting that mixes nothing draws nothing, so runs without it keep their random
 /// streams.
 fn draw_gait_start(
-    gait: Option<lhm_sim::env::StartMix>,
+    gait: Option<&lhm_sim::env::GaitConfig>,
     way_length: impl FnOnce() -> f32,
     rng: &mut SplitMix64,
 ) -> GaitStartDraw {
@@ -521,7 +521,7 @@ impl Rollout {
             let noise = (2.0 * rng.next_f64() as f32 - 1.0) * self.spec.env.demo_start_yaw_noise;
             let yaw = env.yaw_toward_way() + noise;
             // A run's `[[stages]]` reach these settings through the spec of each version.
-            let mix = self.spec.env.gait.as_ref().map(|g| g.start_mix());
+            let mix = self.spec.env.gait.as_ref();
             match draw_gait_start(mix, || env.way_length(), rng) {
                 GaitStartDraw::Rest => {
                     env.start_at_rest_in_gait(Arc::clone(gait), step, yaw);
@@ -838,7 +838,7 @@ mod tests {
         let g = gait(0.5, 1.0, 5.0);
         let mut rng = SplitMix64::new(11);
         let draws: Vec<GaitStartDraw> = (0..4000)
-            .map(|_| draw_gait_start(Some(g.start_mix()), || 3.0, &mut rng))
+            .map(|_| draw_gait_start(Some(&g), || 3.0, &mut rng))
             .collect();
         let rest = draws.iter().filter(|d| **d == GaitStartDraw::Rest).count();
         let on_way: Vec<f32> = draws
@@ -867,11 +867,11 @@ mod tests {
         let mut rng = SplitMix64::new(3);
         let g = gait(0.0, 1.0, 5.0);
         assert_eq!(
-            draw_gait_start(Some(g.start_mix()), || 1.0, &mut rng),
+            draw_gait_start(Some(&g), || 1.0, &mut rng),
             GaitStartDraw::Walking { near: true }
         );
         for _ in 0..200 {
-            match draw_gait_start(Some(g.start_mix()), || 9.0, &mut rng) {
+            match draw_gait_start(Some(&g), || 9.0, &mut rng) {
                 GaitStartDraw::OnWay(d) => assert!((1.2..=5.0).contains(&d), "{d}"),
                 other => panic!("{other:?}"),
             }
@@ -879,7 +879,7 @@ mod tests {
         // near_start_fraction 0: every walking start at the task's start.
         let g = gait(0.0, 0.0, 5.0);
         assert_eq!(
-            draw_gait_start(Some(g.start_mix()), || 9.0, &mut rng),
+            draw_gait_start(Some(&g), || 9.0, &mut rng),
             GaitStartDraw::Walking { near: false }
         );
     }
@@ -891,7 +891,7 @@ mod tests {
         let mut rng = SplitMix64::new(5);
         let before = rng.state();
         let g = gait(0.0, 1.0, 0.0);
-        let draw = draw_gait_start(Some(g.start_mix()), || panic!("way length asked"), &mut rng);
+        let draw = draw_gait_start(Some(&g), || panic!("way length asked"), &mut rng);
         assert_eq!(draw, GaitStartDraw::Walking { near: true });
         let none = draw_gait_start(None, || panic!("way length asked"), &mut rng);
         assert_eq!(none, GaitStartDraw::Walking { near: false });

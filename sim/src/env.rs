@@ -220,27 +220,6 @@ pub struct GaitConfig {
     pub stop: StartRamp,
 }
 
-/// The start settings an episode is drawn with ([`GaitConfig::start_mix`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StartMix {
-    pub rest_start_fraction: f32,
-    pub near_start_fraction: f32,
-    pub start_distance: f32,
-    pub start_distance_max: f32,
-}
-
-impl GaitConfig {
-    /// The start settings episodes are drawn with.
-    pub fn start_mix(&self) -> StartMix {
-        StartMix {
-            rest_start_fraction: self.rest_start_fraction,
-            near_start_fraction: self.near_start_fraction,
-            start_distance: self.start_distance,
-            start_distance_max: self.start_distance_max,
-        }
-    }
-}
-
 impl Default for GaitConfig {
     fn default() -> Self {
         Self {
