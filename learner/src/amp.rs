@@ -28,6 +28,11 @@ pub struct AmpConfig {
     pub minibatch_size: usize,
     /// Agent features kept from past rollouts, so the discriminator does not forget old policies.
     pub replay_capacity: usize,
+    /// Fraction of each rollout's agent rows that enter the replay buffer (each row kept with
+    /// this probability, drawn from the discriminator's RNG; 1 = every row, no draws). A small
+    /// buffer keeping a fraction spans as many past policies as a big one keeping every row, in
+    /// a fraction of the checkpoint (IsaacGymEnvs HumanoidAMP: `amp_replay_keep_prob` 0.01).
+    pub replay_keep_fraction: f64,
     /// Fraction of each agent minibatch drawn from the replay buffer (once it has data).
     pub replay_fraction: f64,
     pub normalize_features: bool,
@@ -67,6 +72,7 @@ impl Default for AmpConfig {
             epochs: 1,
             minibatch_size: 4096,
             replay_capacity: 200_000,
+            replay_keep_fraction: 1.0,
             replay_fraction: 0.5,
             normalize_features: true,
             style_reward_scale: 2.0,
@@ -142,6 +148,30 @@ impl ReplayBuffer {
             data,
             head,
         })
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// The same rows in a buffer of `capacity`: unchanged if that is the current capacity,
+    /// else the newest `capacity` rows (all if fewer), oldest first, ring head at 0.
+    pub fn resized(self, capacity: usize) -> Self {
+        if capacity == self.capacity {
+            return self;
+        }
+        let (dim, len) = (self.dim, self.len());
+        // Oldest first: a full ring's oldest row is at `head`, a filling one's at 0.
+        let mut ordered = Vec::with_capacity(self.data.len());
+        ordered.extend_from_slice(&self.data[self.head * dim..]);
+        ordered.extend_from_slice(&self.data[..self.head * dim]);
+        let keep = len.min(capacity);
+        Self {
+            dim,
+            capacity,
+            data: ordered.split_off((len - keep) * dim),
+            head: 0,
+        }
     }
 
     pub fn push(&mut self, rows: &[f32]) {
@@ -225,8 +255,7 @@ fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
 pub struct AmpTrainer {
     pub config: AmpConfig,
     pub disc: Discriminator,
-    /// Fed with demo features only: the demonstrations are a fixed distribution, so the input
-    /// frame converges instead of chasing the changing agent.
+    /// Fitted on demo and agent features alike (see [`Self::update`]).
     pub feature_norm: Option<RunningMeanStd>,
     pub adam: Adam,
     pub replay: ReplayBuffer,
@@ -235,6 +264,12 @@ pub struct AmpTrainer {
 
 impl AmpTrainer {
     pub fn new(feature_dim: usize, config: AmpConfig) -> LearnerResult<Self> {
+        let keep = config.replay_keep_fraction;
+        if !(keep > 0.0 && keep <= 1.0) {
+            return Err(LearnerError::Invalid(format!(
+                "amp.replay_keep_fraction must be in (0, 1], got {keep}"
+            )));
+        }
         let mut rng = SplitMix64::new(config.seed);
         let disc = Discriminator::new(feature_dim, &config.disc, &mut rng, DType::F32)?;
         let vars = Self::vars_of(&disc);
@@ -382,6 +417,24 @@ impl AmpTrainer {
         Self::vars_of(&self.disc)
     }
 
+    /// Adds `replay_keep_fraction` of `agent`'s rows (all of them at 1, without touching the RNG)
+    /// to the replay buffer.
+    fn push_replay(&mut self, agent: &[f32]) {
+        let keep = self.config.replay_keep_fraction;
+        if keep >= 1.0 {
+            self.replay.push(agent);
+            return;
+        }
+        let dim = self.feature_dim();
+        let mut kept = Vec::with_capacity(((agent.len() as f64) * keep) as usize + dim);
+        for row in agent.chunks_exact(dim) {
+            if self.rng.next_f64() < keep {
+                kept.extend_from_slice(row);
+            }
+        }
+        self.replay.push(&kept);
+    }
+
     /// Trains the discriminator on this rollout's agent features against demo features (raw
     /// rows), then adds the agent features to the replay buffer.
     pub fn update(&mut self, agent: &[f32], demo: &[f32]) -> LearnerResult<AmpStats> {
@@ -445,7 +498,7 @@ impl AmpTrainer {
                 sums.minibatches += 1;
             }
         }
-        self.replay.push(agent);
+        self.push_replay(agent);
         let k = sums.minibatches as f64;
         Ok(AmpStats {
             bce_loss: sums.bce_loss / k,
@@ -486,6 +539,59 @@ mod tests {
         assert!(sample
             .chunks(2)
             .all(|r| r[0] == r[1] && (3.0..=5.0).contains(&r[0])));
+    }
+
+    #[test]
+    fn a_resized_replay_buffer_keeps_its_newest_rows_oldest_first() {
+        // A wrapped ring holding rows 3-6 as [5, 6, 3, 4]: the oldest, 3, sits at the head.
+        let mut ring = ReplayBuffer::new(1, 4);
+        ring.push(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!((ring.rows(), ring.head()), (&[5.0, 6.0, 3.0, 4.0][..], 2));
+        let same = ring.clone().resized(4);
+        assert_eq!(same, ring, "an unchanged capacity leaves the ring as it is");
+        let small = ring.clone().resized(3);
+        assert_eq!(
+            (small.rows(), small.head(), small.capacity()),
+            (&[4.0, 5.0, 6.0][..], 0, 3)
+        );
+        let big = ring.clone().resized(6);
+        assert_eq!((big.rows(), big.head()), (&[3.0, 4.0, 5.0, 6.0][..], 0));
+        // The grown buffer fills before it overwrites, then overwrites its oldest row.
+        let mut big = big;
+        big.push(&[7.0, 8.0, 9.0]);
+        assert_eq!(big.rows(), &[9.0, 4.0, 5.0, 6.0, 7.0, 8.0]);
+        // A filling buffer (head 0) shrinks to its newest rows.
+        let mut filling = ReplayBuffer::new(2, 10);
+        filling.push(&[1.0, 1.0, 2.0, 2.0, 3.0, 3.0]);
+        assert_eq!(filling.resized(2).rows(), &[2.0, 2.0, 3.0, 3.0]);
+        assert!(ReplayBuffer::new(2, 5).resized(0).is_empty());
+    }
+
+    #[test]
+    fn the_replay_buffer_keeps_the_configured_fraction_of_each_rollout() {
+        let config = |keep: f64| AmpConfig {
+            disc: MlpConfig::with_hidden(&[8]),
+            replay_capacity: 100_000,
+            replay_keep_fraction: keep,
+            minibatch_size: 64,
+            ..AmpConfig::default()
+        };
+        let agent: Vec<f32> = (0..4000 * 2).map(|i| (i / 2) as f32).collect();
+        let demo = vec![0.5f32; 64 * 2];
+        for keep in [1.0, 0.2] {
+            let mut trainer = AmpTrainer::new(2, config(keep)).unwrap();
+            trainer.update(&agent, &demo).unwrap();
+            let kept = trainer.replay.len() as f64 / 4000.0;
+            assert!((kept - keep).abs() < 0.03, "kept {kept} at {keep}");
+            // Whole rows, in rollout order, none twice.
+            let firsts: Vec<f32> = trainer.replay.rows().chunks(2).map(|r| r[0]).collect();
+            assert!(trainer.replay.rows().chunks(2).all(|r| r[0] == r[1]));
+            assert!(firsts.windows(2).all(|w| w[0] < w[1]));
+        }
+        for bad in [0.0, -0.5, 1.5, f64::NAN] {
+            let err = AmpTrainer::new(2, config(bad)).unwrap_err();
+            assert!(err.to_string().contains("replay_keep_fraction"), "{err}");
+        }
     }
 
     #[test]

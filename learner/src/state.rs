@@ -214,6 +214,10 @@ impl Learner {
     pub fn save_policy(&self, stem: &Path) -> LearnerResult<()> {
         let tensors = self.policy_tensors();
         let mut meta = self.meta();
+        // The noise the policy acts with now: a schedule's stage sets its own fixed log_std on
+        // the actor-critic, while the learner's configuration keeps the run's (which a resume
+        // compares against).
+        meta.config.actor_critic = self.actor_critic.config.clone();
         meta.config.amp = None;
         meta.amp = None;
         meta.ppo_moments = false;
@@ -223,7 +227,9 @@ impl Learner {
     }
 
     /// Rebuilds the learner stored at `stem`. With `expected`, the stored configuration must equal
-    /// it (a run resumed with different settings is refused rather than silently changed).
+    /// it (a run resumed with different settings is refused rather than silently changed), except
+    /// for the AMP replay buffer's capacity and keep fraction: those are taken from `expected`,
+    /// and a smaller capacity keeps the newest rows.
     pub fn load(stem: &Path, expected: Option<&LearnerConfig>) -> LearnerResult<Self> {
         let loaded = checkpoint::load::<LearnerMeta>(stem, CHECKPOINT_KIND)?;
         let meta = &loaded.payload;
@@ -231,6 +237,7 @@ impl Learner {
             path: loaded.paths.meta.clone(),
             what,
         };
+        let mut config = meta.config.clone();
         if let Some(expected) = expected {
             let differs = describe_differences(expected, &meta.config);
             if !differs.is_empty() {
@@ -240,8 +247,26 @@ impl Learner {
                 ))
                 .into());
             }
+            // The replay buffer's size may change on resume (to shrink a run's checkpoint):
+            // the requested settings apply from here on.
+            if let (Some(to), Some(from)) = (&expected.amp, &mut config.amp) {
+                let (a, b) = (&to.config, &mut from.config);
+                if (a.replay_capacity, a.replay_keep_fraction)
+                    != (b.replay_capacity, b.replay_keep_fraction)
+                {
+                    tracing::info!(
+                        "AMP replay buffer resized on resume: capacity {} -> {}, keep fraction {} -> {} (the newest rows kept)",
+                        b.replay_capacity,
+                        a.replay_capacity,
+                        b.replay_keep_fraction,
+                        a.replay_keep_fraction
+                    );
+                    b.replay_capacity = a.replay_capacity;
+                    b.replay_keep_fraction = a.replay_keep_fraction;
+                }
+            }
         }
-        let mut learner = Learner::new(meta.config.clone())?;
+        let mut learner = Learner::new(config)?;
         learner.counters = meta.counters.clone();
 
         let ac_vars = learner.actor_critic.named_vars();
@@ -302,13 +327,15 @@ impl Learner {
                 } else {
                     loaded.f32_values(REPLAY_TENSOR, &[amp_meta.replay_rows, dim])?
                 };
-                amp.replay = ReplayBuffer::from_parts(
-                    dim,
-                    amp.config.replay_capacity,
-                    rows,
-                    amp_meta.replay_head,
-                )
-                .map_err(|e| mismatch(e.to_string()))?;
+                let stored_capacity = meta
+                    .config
+                    .amp
+                    .as_ref()
+                    .map_or(amp.config.replay_capacity, |a| a.config.replay_capacity);
+                amp.replay =
+                    ReplayBuffer::from_parts(dim, stored_capacity, rows, amp_meta.replay_head)
+                        .map_err(|e| mismatch(e.to_string()))?
+                        .resized(amp.config.replay_capacity);
             }
             _ => {
                 return Err(mismatch(
@@ -341,7 +368,15 @@ fn describe_differences(a: &LearnerConfig, b: &LearnerConfig) -> Vec<String> {
     if a.ppo != b.ppo {
         out.push("ppo".into());
     }
-    if a.amp != b.amp {
+    // The replay buffer's size is not part of what must match (see [`Learner::load`]).
+    let without_replay_size = |amp: &Option<AmpSetup>| {
+        amp.clone().map(|mut setup| {
+            setup.config.replay_capacity = 0;
+            setup.config.replay_keep_fraction = 1.0;
+            setup
+        })
+    };
+    if without_replay_size(&a.amp) != without_replay_size(&b.amp) {
         out.push("amp".into());
     }
     out

@@ -14,6 +14,11 @@ const FEAT: usize = 4;
 const ROWS: usize = 96;
 
 fn config() -> LearnerConfig {
+    config_keeping(1.0)
+}
+
+/// [`config`] with the replay buffer keeping `keep` of each rollout's agent rows.
+fn config_keeping(keep: f64) -> LearnerConfig {
     let mut actor_critic = ActorCriticConfig::with_hidden(&[32, 32]);
     actor_critic.policy.log_std = LogStd::Learned(-1.0);
     // The value normaliser's statistics must survive the checkpoint too.
@@ -35,6 +40,7 @@ fn config() -> LearnerConfig {
                 minibatch_size: 40,
                 epochs: 2,
                 replay_capacity: 150,
+                replay_keep_fraction: keep,
                 seed: 23,
                 ..AmpConfig::default()
             },
@@ -95,8 +101,20 @@ fn scratch(name: &str) -> PathBuf {
 
 #[test]
 fn resumed_run_matches_uninterrupted_run_bit_for_bit() {
+    resume_matches_uninterrupted(1.0, "exact");
+}
+
+#[test]
+fn resumed_run_keeping_part_of_each_rollout_matches_bit_for_bit() {
+    // The keep draws come from the discriminator's RNG, which the checkpoint carries; 0.6 of
+    // 3 x 96 rows wraps the 150-row ring before the save.
+    resume_matches_uninterrupted(0.6, "exact-keep");
+}
+
+fn resume_matches_uninterrupted(keep: f64, name: &str) {
     const K: u64 = 3;
-    let dir = scratch("exact");
+    let config = || config_keeping(keep);
+    let dir = scratch(name);
     let mut interrupted = Learner::new(config()).unwrap();
     for k in 0..K {
         train_step(&mut interrupted, k);
@@ -161,6 +179,101 @@ fn resumed_run_matches_uninterrupted_run_bit_for_bit() {
         "{} tensors, {compared} values identical after resume at update {}",
         a.len(),
         K + 1
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_run_resumes_with_a_smaller_replay_buffer_holding_its_newest_rows() {
+    let dir = scratch("shrink");
+    let stem = dir.join("c");
+    let mut learner = Learner::new(config()).unwrap();
+    for k in 0..3 {
+        train_step(&mut learner, k);
+    }
+    // 288 rows through a 150-row ring: full and wrapped.
+    let stored = learner.amp.as_ref().unwrap().replay.clone();
+    assert_eq!(stored.len(), 150);
+    assert_ne!(stored.head(), 0);
+    learner.save(&stem).unwrap();
+
+    let mut smaller = config();
+    let amp = &mut smaller.amp.as_mut().unwrap().config;
+    amp.replay_capacity = 40;
+    amp.replay_keep_fraction = 0.5;
+    let resumed = Learner::load(&stem, Some(&smaller)).unwrap();
+    let trainer = resumed.amp.as_ref().unwrap();
+    assert_eq!(trainer.config.replay_capacity, 40);
+    assert_eq!(trainer.config.replay_keep_fraction, 0.5);
+    assert_eq!(
+        resumed.config, smaller,
+        "the requested replay settings apply"
+    );
+    // The newest 40 rows of the rollouts (the last rollout's last 40), oldest first.
+    assert_eq!(trainer.replay.rows(), stored.clone().resized(40).rows());
+    let mut rng = ppo_step(&mut Learner::new(config()).unwrap(), 2);
+    let last: Vec<f32> = (0..ROWS * FEAT)
+        .map(|_| rng.uniform(-1.0, 1.0) as f32)
+        .collect();
+    assert_eq!(trainer.replay.rows(), &last[(ROWS - 40) * FEAT..]);
+    // The rest is the stored learner, and it trains on.
+    assert_eq!(resumed.counters, learner.counters);
+    let mut resumed = resumed;
+    train_step(&mut resumed, 3);
+    assert_eq!(resumed.amp.as_ref().unwrap().replay.len(), 40);
+
+    // Any other AMP setting still has to match.
+    let mut other = config();
+    other.amp.as_mut().unwrap().config.logit_reg = 0.5;
+    match Learner::load(&stem, Some(&other)) {
+        Err(LearnerError::Checkpoint(CheckpointError::Mismatch { what, .. })) => {
+            assert!(what.contains("amp"), "{what}")
+        }
+        other => panic!("expected a mismatch error, got {other:?}"),
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_policy_file_records_the_noise_its_stage_set_and_the_checkpoint_the_runs() {
+    let mut config = config();
+    config.actor_critic.policy.log_std = LogStd::Fixed(-4.0);
+    let mut learner = Learner::new(config.clone()).unwrap();
+    train_step(&mut learner, 0);
+    // What a `[[stages]]` entry with `log_std = -3.5` does on entry.
+    learner.actor_critic.set_fixed_log_std(-3.5).unwrap();
+    let dir = scratch("stage-noise");
+    learner.save(&dir.join("checkpoint")).unwrap();
+    learner.save_policy(&dir.join("policy")).unwrap();
+    let policy = Learner::load(&dir.join("policy"), None).unwrap();
+    assert_eq!(
+        policy.actor_critic.config.policy.log_std,
+        LogStd::Fixed(-3.5)
+    );
+    let obs: Vec<f32> = (0..OBS).map(|i| i as f32 * 0.1).collect();
+    let mean = policy.actor_critic.act_deterministic(&obs).unwrap();
+    let draws = 4000;
+    let many: Vec<f32> = obs.iter().cycle().take(draws * OBS).copied().collect();
+    let acted = policy
+        .actor_critic
+        .act(&many, &mut SplitMix64::new(5))
+        .unwrap();
+    let var = acted
+        .actions
+        .chunks(ACT)
+        .flat_map(|a| a.iter().zip(&mean).map(|(x, m)| ((x - m) as f64).powi(2)))
+        .sum::<f64>()
+        / (draws * ACT) as f64;
+    let std = var.sqrt();
+    assert!(
+        (std / (-3.5f64).exp() - 1.0).abs() < 0.05,
+        "sampled std {std}, want e^-3.5"
+    );
+    // The full checkpoint keeps the run's configuration, so the run resumes against it.
+    let resumed = Learner::load(&dir.join("checkpoint"), Some(&config)).unwrap();
+    assert_eq!(
+        resumed.config.actor_critic.policy.log_std,
+        LogStd::Fixed(-4.0)
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
