@@ -17,11 +17,13 @@ use lhm_protos::keys;
 
 #[derive(Args, Clone)]
 pub struct LearnerOpts {
-    /// Training configuration (TOML; every field optional, laid over the library's defaults).
-    /// Without it a plain `lhm train` runs the built-in Teacher 1 (`configs/teacher1.toml`: the
-    /// residual gait with PPO + AMP), and a `--stage` or `--teacher1` run the library's defaults.
+    /// Training configuration (TOML; every field optional, laid over the library's defaults);
+    /// repeat it to lay several files over each other in order, key by key. Without it a plain
+    /// `lhm train` runs the built-in Teacher 1 from scratch (`configs/teacher1.toml` then
+    /// `configs/teacher1-schedule.toml`: the residual gait, its settings reached in stages, PPO +
+    /// AMP in the last), and a `--stage` or `--teacher1` run the library's defaults.
     #[arg(long)]
-    config: Option<PathBuf>,
+    config: Vec<PathBuf>,
     /// Run id (overrides the config's).
     #[arg(long)]
     run_id: Option<String>,
@@ -70,27 +72,42 @@ pub struct LearnerOpts {
     scenes: crate::scenes_cmd::Source,
 }
 
-/// `configs/teacher1.toml`, built in: the run a plain `lhm train` makes without `--config`.
+/// `configs/teacher1.toml`, built in: Teacher 1's settings (the schedule's last stage).
 pub(crate) const TEACHER1_TOML: &str = include_str!("../../configs/teacher1.toml");
+/// `configs/teacher1-schedule.toml`, built in: the `[[stages]]` that reach those settings from
+/// scratch.
+pub(crate) const TEACHER1_SCHEDULE_TOML: &str =
+    include_str!("../../configs/teacher1-schedule.toml");
 
-/// [`TEACHER1_TOML`] laid over `TrainConfig::default()`, as `--config configs/teacher1.toml` is.
+/// The run a plain `lhm train` makes without `--config`: [`TEACHER1_TOML`] then
+/// [`TEACHER1_SCHEDULE_TOML`] laid over `TrainConfig::default()`, as `--config
+/// configs/teacher1.toml --config configs/teacher1-schedule.toml` is.
 pub(crate) fn teacher1_config() -> Result<TrainConfig> {
-    Ok(TrainConfig::from_toml_sources(&[(
-        "configs/teacher1.toml (built in)".into(),
-        TEACHER1_TOML.into(),
-    )])?)
+    Ok(TrainConfig::from_toml_sources(&[
+        (
+            "configs/teacher1.toml (built in)".into(),
+            TEACHER1_TOML.into(),
+        ),
+        (
+            "configs/teacher1-schedule.toml (built in)".into(),
+            TEACHER1_SCHEDULE_TOML.into(),
+        ),
+    ])?)
 }
 
 impl LearnerOpts {
     fn train_config(&self) -> Result<TrainConfig> {
         let plain_teacher1 =
             self.stage.is_none() && self.teacher1.is_none() && self.teacher2.is_none();
-        let mut config = match &self.config {
-            Some(path) => TrainConfig::from_toml_file(path)?,
+        let mut config = if !self.config.is_empty() {
+            let paths: Vec<&std::path::Path> = self.config.iter().map(PathBuf::as_path).collect();
+            TrainConfig::from_toml_files(&paths)?
+        } else if plain_teacher1 {
+            teacher1_config()?
+        } else {
             // The pipeline's stages and Teacher 2 keep `TrainConfig::default()` (their actors do
             // not run the gait yet); a plain `lhm train` is Teacher 1 as it is trained today.
-            None if plain_teacher1 => teacher1_config()?,
-            None => TrainConfig::default(),
+            TrainConfig::default()
         };
         if let Some(id) = &self.run_id {
             config.run_id = id.clone();
@@ -664,6 +681,80 @@ mod tests {
             .env
             .gait
             .is_none());
+    }
+
+    #[test]
+    fn the_built_in_run_is_teacher1_reached_by_its_schedule_and_config_files_stack_in_order() {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            opts: LearnerOpts,
+        }
+        let parse = |args: &[&str]| {
+            <Cli as clap::Parser>::try_parse_from(args)
+                .expect("flags")
+                .opts
+                .train_config()
+                .expect("config")
+        };
+        let configs = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs");
+        let settings = format!("{configs}/teacher1.toml");
+        let schedule = format!("{configs}/teacher1-schedule.toml");
+        let built_in = parse(&["lhm"]);
+        // The built-in run is the two files, in that order.
+        assert_eq!(
+            built_in,
+            parse(&["lhm", "--config", &settings, "--config", &schedule])
+        );
+        // teacher1.toml alone (a fine-tune's base) has no schedule and the same settings.
+        let alone = parse(&["lhm", "--config", &settings]);
+        assert!(alone.stages.is_empty());
+        assert_eq!(
+            TrainConfig {
+                stages: Vec::new(),
+                ..built_in.clone()
+            },
+            alone
+        );
+        // From scratch: no AMP and σ e^−3.5, every start at rest, the stop at the distance; the
+        // file's own settings (AMP, feet-down stop, half the starts walking) hold at the end.
+        let first = built_in.stage_at(0).expect("stage at 0");
+        assert_eq!(first.index, Some(0));
+        assert!(!first.amp_active);
+        assert_eq!(first.log_std, Some(-3.5));
+        let gait = first.spec.env.gait.as_ref().expect("gait");
+        assert_eq!(gait.rest_start_fraction, 1.0);
+        assert_eq!(gait.stop_on, lhm_sim::env::StopOn::Distance);
+        let last = built_in
+            .stage_at(built_in.stages.last().expect("stages").until_iteration)
+            .expect("past the schedule");
+        assert_eq!(last.index, None);
+        assert!(last.amp_active);
+        assert_eq!(last.log_std, Some(-4.0));
+        let gait = last.spec.env.gait.as_ref().expect("gait");
+        assert_eq!(gait.stop_on, lhm_sim::env::StopOn::FeetDown);
+        assert_eq!(gait.rest_start_fraction, 0.5);
+        // A later file is laid over an earlier one key by key.
+        let dir = std::env::temp_dir().join(format!("lhm-config-stack-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let top = dir.join("top.toml");
+        std::fs::write(&top, "[ppo.adam]\nlr = 1e-5\n").expect("write");
+        let stacked = parse(&[
+            "lhm",
+            "--config",
+            &settings,
+            "--config",
+            &top.to_string_lossy(),
+        ]);
+        std::fs::remove_dir_all(&dir).expect("clean up");
+        assert_eq!(stacked.ppo.adam.lr, 1e-5);
+        assert_eq!(
+            TrainConfig {
+                ppo: alone.ppo.clone(),
+                ..stacked
+            },
+            alone
+        );
     }
 
     #[test]
