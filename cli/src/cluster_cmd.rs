@@ -648,18 +648,21 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_plain_train_runs_the_built_in_teacher1_and_a_stage_the_library_defaults() {
+    /// `LearnerOpts` as clap parses them from `args` (the program name first).
+    fn learner_opts(args: &[&str]) -> LearnerOpts {
         #[derive(clap::Parser)]
         struct Cli {
             #[command(flatten)]
             opts: LearnerOpts,
         }
-        let parse = |args: &[&str]| {
-            <Cli as clap::Parser>::try_parse_from(args)
-                .expect("flags")
-                .opts
-        };
+        <Cli as clap::Parser>::try_parse_from(args)
+            .expect("flags")
+            .opts
+    }
+
+    #[test]
+    fn a_plain_train_runs_the_built_in_teacher1_and_a_stage_the_library_defaults() {
+        let parse = learner_opts;
         let config = parse(&["lhm"])
             .train_config()
             .expect("the built-in configuration");
@@ -685,18 +688,7 @@ mod tests {
 
     #[test]
     fn the_built_in_run_is_teacher1_reached_by_its_schedule_and_config_files_stack_in_order() {
-        #[derive(clap::Parser)]
-        struct Cli {
-            #[command(flatten)]
-            opts: LearnerOpts,
-        }
-        let parse = |args: &[&str]| {
-            <Cli as clap::Parser>::try_parse_from(args)
-                .expect("flags")
-                .opts
-                .train_config()
-                .expect("config")
-        };
+        let parse = |args: &[&str]| learner_opts(args).train_config().expect("config");
         let configs = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs");
         let settings = format!("{configs}/teacher1.toml");
         let schedule = format!("{configs}/teacher1-schedule.toml");
