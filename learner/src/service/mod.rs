@@ -8,6 +8,7 @@ pub mod batch;
 pub mod intake;
 pub mod metrics_csv;
 pub mod optimise;
+pub mod run_config;
 pub mod stage;
 
 use std::collections::BTreeSet;
@@ -33,6 +34,7 @@ use crate::state::{AmpSetup, Learner, LearnerConfig};
 use batch::EpisodeSummary;
 use intake::{admit, Intake, IntakeCounters};
 use optimise::Optimiser;
+use run_config::{keep_earlier_config, refuse_another_role};
 
 /// Everything a training run is, as one TOML file (every field has a default).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -649,28 +651,6 @@ fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<(), ServiceE
     std::fs::rename(&tmp, path).map_err(io)
 }
 
-/// A run directory whose `config.toml` names another role (e.g. `lhm train --stage student` into
-/// a Teacher 1 run's directory) is refused before anything in it is touched: resuming would train
-/// one role's checkpoint as another's.
-fn refuse_another_role(config: &TrainConfig, run_dir: &Path) -> Result<(), ServiceError> {
-    let path = run_dir.join(RUN_CONFIG_FILE);
-    let Ok(text) = std::fs::read_to_string(&path) else {
-        return Ok(());
-    };
-    let saved = text
-        .parse::<toml::Table>()
-        .ok()
-        .and_then(|t| t.get("role").and_then(|r| r.as_str()).map(str::to_owned));
-    match saved {
-        Some(role) if role != config.role => Err(ServiceError::Config(format!(
-            "{} holds a {role} run; this is a {} run: give it another --run-id",
-            run_dir.display(),
-            config.role
-        ))),
-        _ => Ok(()),
-    }
-}
-
 /// The checkpoint stem of a run: `<run_dir>/checkpoint.{safetensors,json}`.
 /// Copies the policy, value function and normalisers of the checkpoint at `path` into a fresh
 /// learner; a different network layout is an error naming the file and the tensor.
@@ -968,7 +948,8 @@ pub struct Hooks<'a> {
 }
 
 /// Prepares the run directory (refusing one of another role, writing `config.toml`) and the
-/// learner: resumed from its checkpoint if it has one (with the iteration it resumes from), else
+/// learner: resumed from its checkpoint if it has one (with the iteration it resumes from; a
+/// changed configuration is named and the earlier one kept, [`keep_earlier_config`]), else
 /// fresh or started from `init_from`.
 fn open_learner(
     config: &TrainConfig,
@@ -979,19 +960,25 @@ fn open_learner(
         source,
     })?;
     refuse_another_role(config, run_dir)?;
-    config.write_run_config(run_dir)?;
     let stem = checkpoint_stem(run_dir);
     let learner_config = config.learner_config();
     if stem.with_extension("json").is_file() {
         let l = Learner::load(&stem, Some(&learner_config))?;
-        tracing::info!(
-            "resuming {} from iteration {}",
-            stem.display(),
-            l.counters.iteration
-        );
         let it = l.counters.iteration;
+        tracing::info!("resuming {} from iteration {it}", stem.display());
+        if let Some(change) = keep_earlier_config(config, run_dir, it)? {
+            tracing::warn!(
+                "{} differs from the configuration it was trained with up to iteration {it} in: {} \
+                 (the earlier one is kept as {})",
+                run_dir.display(),
+                change.keys.join(", "),
+                change.kept_as.display()
+            );
+        }
+        config.write_run_config(run_dir)?;
         Ok((l, Some(it)))
     } else {
+        config.write_run_config(run_dir)?;
         let mut fresh = Learner::new(learner_config)?;
         if let Some(path) = &config.init_from {
             init_actor_critic(&mut fresh, path)?;
@@ -1838,6 +1825,62 @@ start_distance_max = 0.0
             before
         );
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A resume under another schedule keeps the configuration that trained the iterations
+    /// before it as `config.until-<iteration>.toml`; one that changes only session keys keeps
+    /// nothing; a second resume at the same iteration leaves the kept file alone.
+    #[test]
+    fn a_resume_under_another_configuration_keeps_the_earlier_one() {
+        let runs = std::env::temp_dir().join(format!("lhm-resume-config-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&runs);
+        let first = TrainConfig {
+            run_id: "r".into(),
+            runs_dir: runs.clone(),
+            network: ActorCriticConfig::with_hidden(&[8]),
+            amp_enabled: false,
+            ..TrainConfig::default()
+        };
+        let dir = first.run_dir();
+        let (mut learner, resumed) = open_learner(&first, &dir).unwrap();
+        assert_eq!(resumed, None);
+        learner.counters.iteration = 7;
+        learner.save(&checkpoint_stem(&dir)).unwrap();
+        let kept = run_config::earlier_config_path(&dir, 7);
+
+        let longer = TrainConfig {
+            max_iterations: Some(20),
+            ..first.clone()
+        };
+        assert_eq!(open_learner(&longer, &dir).unwrap().1, Some(7));
+        assert!(!kept.exists(), "only a session key changed");
+        let saved = std::fs::read_to_string(dir.join(RUN_CONFIG_FILE)).unwrap();
+
+        let staged = TrainConfig {
+            stages: vec![RunStage {
+                until_iteration: 9,
+                amp_enabled: Some(false),
+                ..RunStage::default()
+            }],
+            ..first.clone()
+        };
+        let change = keep_earlier_config(&staged, &dir, 7).unwrap().unwrap();
+        assert_eq!(change.keys, vec!["stages (0 entries → 1 entry)".to_owned()]);
+        let _ = std::fs::remove_file(&kept);
+        assert_eq!(open_learner(&staged, &dir).unwrap().1, Some(7));
+        assert_eq!(std::fs::read_to_string(&kept).unwrap(), saved);
+        assert_eq!(
+            TrainConfig::from_toml_file(&dir.join(RUN_CONFIG_FILE)).unwrap(),
+            staged
+        );
+        // Resumed again at 7 under a third configuration: the file of what trained 0..7 stays.
+        let third = TrainConfig {
+            batch_steps: first.batch_steps * 2,
+            ..first.clone()
+        };
+        assert_eq!(open_learner(&third, &dir).unwrap().1, Some(7));
+        assert_eq!(std::fs::read_to_string(&kept).unwrap(), saved);
+        let _ = std::fs::remove_dir_all(&runs);
     }
 
     /// A fine-tuning run starts acting exactly as the checkpoint it starts from; a checkpoint of
