@@ -651,7 +651,6 @@ fn write_json_atomic(path: &Path, value: &impl Serialize) -> Result<(), ServiceE
     std::fs::rename(&tmp, path).map_err(io)
 }
 
-/// The checkpoint stem of a run: `<run_dir>/checkpoint.{safetensors,json}`.
 /// Copies the policy, value function and normalisers of the checkpoint at `path` into a fresh
 /// learner; a different network layout is an error naming the file and the tensor.
 fn init_actor_critic(learner: &mut Learner, path: &Path) -> Result<(), ServiceError> {
@@ -843,6 +842,7 @@ fn check_non_negative(at: &str, name: &str, x: f32) -> Result<(), ServiceError> 
     }
 }
 
+/// The checkpoint stem of a run: `<run_dir>/checkpoint.{safetensors,json}`.
 pub fn checkpoint_stem(run_dir: &Path) -> PathBuf {
     run_dir.join("checkpoint")
 }
@@ -968,8 +968,8 @@ fn open_learner(
         tracing::info!("resuming {} from iteration {it}", stem.display());
         if let Some(change) = keep_earlier_config(config, run_dir, it)? {
             tracing::warn!(
-                "{} differs from the configuration it was trained with up to iteration {it} in: {} \
-                 (the earlier one is kept as {})",
+                "this run's configuration differs from the one {} was trained with up to \
+                 iteration {it} in: {} (that one is kept as {})",
                 run_dir.display(),
                 change.keys.join(", "),
                 change.kept_as.display()
