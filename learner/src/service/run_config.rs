@@ -44,14 +44,17 @@ pub(super) fn refuse_another_role(
 }
 
 /// The dotted keys whose values differ between a saved configuration and this run's (a key
-/// only one side has counts, an array counts whole), session keys left out; sorted.
+/// only one side has counts; see [`diff_values`] for arrays), session keys left out; in key
+/// order.
 pub fn changed_keys(saved: &toml::Table, now: &toml::Table) -> Vec<String> {
+    let without_session = |t: &toml::Table| -> toml::Table {
+        t.iter()
+            .filter(|(k, _)| !SESSION_KEYS.contains(&k.as_str()))
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect()
+    };
     let mut out = Vec::new();
-    diff_tables("", saved, now, &mut out);
-    out.retain(|k| {
-        let top = k.split(['.', ' ', '[']).next().unwrap_or(k);
-        !SESSION_KEYS.contains(&top)
-    });
+    diff_tables("", &without_session(saved), &without_session(now), &mut out);
     out
 }
 
