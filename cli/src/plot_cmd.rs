@@ -34,6 +34,15 @@ const PANELS: &[(&str, &str)] = &[
     // Every episode's reach, demo and gait starts too (a run with [env.gait] has no task starts).
     ("reach_rate_all", "reach rate (all starts)"),
     ("disc_accuracy", "discriminator accuracy"),
+    // Each side apart (runs from the forty-third session on): which one moves the mean.
+    (
+        "disc_demo_accuracy",
+        "discriminator accuracy on demo windows",
+    ),
+    (
+        "disc_agent_accuracy",
+        "discriminator accuracy on agent windows",
+    ),
     ("style_reward", "style reward"),
     ("task_reward", "task reward"),
     ("samples_per_s", "samples/s"),

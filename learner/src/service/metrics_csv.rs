@@ -54,6 +54,14 @@ pub const COLUMNS: &[&str] = &[
     // Reach over every finished episode, demo and gait starts included (`reach_rate` counts task
     // starts only; with [env.gait] every episode starts in the gait).
     "reach_rate_all",
+    // The discriminator's update, each side apart (`disc_accuracy` is their mean), and its
+    // losses before the weights (gradient penalty unscaled).
+    "disc_demo_accuracy",
+    "disc_agent_accuracy",
+    "disc_demo_logit",
+    "disc_agent_logit",
+    "disc_bce_loss",
+    "disc_grad_penalty",
 ];
 
 pub struct MetricsCsv {

@@ -160,16 +160,157 @@ fn ppo_amp(
         }
         _ => None,
     };
-    let metrics = vec![
+    let mut metrics = vec![
         metric("policy_loss", "ppo/policy_loss", ppo.policy_loss),
         metric("value_loss", "ppo/value_loss", ppo.value_loss),
         metric("approx_kl", "ppo/approx_kl", ppo.approx_kl),
         metric("lr", "ppo/lr", ppo.lr),
         metric("clip_fraction", "ppo/clip_fraction", ppo.clip_fraction),
     ];
+    if let Some(a) = &amp {
+        // Each side apart: a mean accuracy that dips can be the agent fooling the discriminator
+        // or the discriminator losing the demo.
+        metrics.extend([
+            metric("disc_demo_accuracy", "amp/demo_accuracy", a.demo_accuracy),
+            metric(
+                "disc_agent_accuracy",
+                "amp/agent_accuracy",
+                a.agent_accuracy,
+            ),
+            metric("disc_demo_logit", "amp/demo_logit_mean", a.demo_logit_mean),
+            metric(
+                "disc_agent_logit",
+                "amp/agent_logit_mean",
+                a.agent_logit_mean,
+            ),
+            metric("disc_bce_loss", "amp/bce_loss", a.bce_loss),
+            metric("disc_grad_penalty", "amp/grad_penalty", a.grad_penalty),
+        ]);
+    }
     Ok(Update {
         summary: assembled.summary,
         disc_accuracy: amp.as_ref().map(|a| a.accuracy()),
         metrics,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use lhm_nets::{ActorCriticConfig, MlpConfig};
+    use lhm_protos::WireMessage;
+
+    use super::*;
+    use crate::amp::AmpConfig;
+    use crate::ppo::PpoConfig;
+    use crate::state::{AmpSetup, LearnerConfig};
+
+    /// Demo rows far from the agent's (features near +3 against the agent's near 0).
+    struct FarDemo;
+    impl DemoSource for FarDemo {
+        fn sample(&mut self, rows: usize) -> Vec<f32> {
+            (0..rows * 2).map(|i| 3.0 + (i % 5) as f32 * 0.1).collect()
+        }
+    }
+
+    fn chunk(offset: f32) -> TrajectoryChunk {
+        let n = 16usize;
+        TrajectoryChunk {
+            run_id: "r".into(),
+            actor_id: "a".into(),
+            num_steps: n as u32,
+            obs_dim: 1,
+            act_dim: 1,
+            amp_dim: 2,
+            observations: (0..n).map(|t| t as f32 * 0.1).collect(),
+            actions: vec![0.0; n],
+            log_probs: vec![0.0; n],
+            values: vec![0.0; n],
+            rewards: vec![1.0; n],
+            dones: vec![false; n],
+            truncated: vec![false; n],
+            truncation_values: vec![0.0; n],
+            amp_features: (0..n)
+                .flat_map(|t| [offset + t as f32 * 0.01, -offset])
+                .collect(),
+            ..TrajectoryChunk::versioned()
+        }
+    }
+
+    fn learner() -> Learner {
+        Learner::new(LearnerConfig {
+            obs_dim: 1,
+            act_dim: 1,
+            actor_critic: ActorCriticConfig::with_hidden(&[8]),
+            ppo: PpoConfig {
+                epochs: 1,
+                minibatch_size: 16,
+                ..PpoConfig::default()
+            },
+            amp: Some(AmpSetup {
+                feature_dim: 2,
+                config: AmpConfig {
+                    disc: MlpConfig::with_hidden(&[8]),
+                    minibatch_size: 16,
+                    epochs: 4,
+                    adam: lhm_nets::AdamConfig {
+                        lr: 1e-2,
+                        ..lhm_nets::AdamConfig::default()
+                    },
+                    ..AmpConfig::default()
+                },
+            }),
+        })
+        .unwrap()
+    }
+
+    fn value(update: &Update, column: &str) -> Option<f64> {
+        update
+            .metrics
+            .iter()
+            .find(|m| m.column == column)
+            .map(|m| m.value)
+    }
+
+    #[test]
+    fn an_amp_update_reports_each_side_of_the_discriminator() {
+        let mut learner = learner();
+        let mut optimiser = Optimiser::PpoAmp {
+            demo: Some(Box::new(FarDemo)),
+        };
+        let chunks = [chunk(0.0), chunk(0.2)];
+        // Without AMP (a stage with it off) no discriminator columns.
+        let off = optimiser.update(&mut learner, &chunks, false).unwrap();
+        assert!(off.disc_accuracy.is_none());
+        assert!(value(&off, "disc_demo_accuracy").is_none());
+        let mut last = None;
+        for _ in 0..20 {
+            last = Some(optimiser.update(&mut learner, &chunks, true).unwrap());
+        }
+        let update = last.unwrap();
+        let demo = value(&update, "disc_demo_accuracy").expect("demo accuracy");
+        let agent = value(&update, "disc_agent_accuracy").expect("agent accuracy");
+        let mean = update.disc_accuracy.expect("accuracy");
+        assert!(
+            (0.5 * (demo + agent) - mean).abs() < 1e-12,
+            "{demo} {agent} {mean}"
+        );
+        // Two separable sets: after a few updates both sides are told apart and the logits say so.
+        assert!(demo > 0.9 && agent > 0.9, "{demo} {agent}");
+        let demo_logit = value(&update, "disc_demo_logit").expect("demo logit");
+        let agent_logit = value(&update, "disc_agent_logit").expect("agent logit");
+        assert!(
+            demo_logit > 0.0 && agent_logit < 0.0,
+            "{demo_logit} {agent_logit}"
+        );
+        assert!(value(&update, "disc_bce_loss").is_some_and(|l| l.is_finite() && l > 0.0));
+        assert!(value(&update, "disc_grad_penalty").is_some_and(|g| g.is_finite() && g >= 0.0));
+        // Every column named is one metrics.csv has.
+        for m in &update.metrics {
+            assert!(
+                super::super::metrics_csv::COLUMNS.contains(&m.column),
+                "{}",
+                m.column
+            );
+        }
+    }
 }
