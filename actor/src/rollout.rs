@@ -180,6 +180,7 @@ struct ChunkBuf {
     truncation_values: Vec<f32>,
     amp_features: Vec<f32>,
     gait_stopped: Vec<bool>,
+    gait_ramping: Vec<bool>,
     episodes: Vec<EpisodeStats>,
     poisoned: bool,
 }
@@ -686,6 +687,7 @@ impl Rollout {
                 buf.amp_features.extend_from_slice(&features);
             }
             buf.gait_stopped.push(slot.env.gait_stopped());
+            buf.gait_ramping.push(slot.env.gait_ramping());
             if result.physics_invalid {
                 buf.poisoned = true;
             }
@@ -806,6 +808,11 @@ impl Rollout {
                 // Sent only where it says something: most chunks have no stopped step.
                 gait_stopped: if buf.gait_stopped.contains(&true) {
                     buf.gait_stopped
+                } else {
+                    Vec::new()
+                },
+                gait_ramping: if buf.gait_ramping.contains(&true) {
+                    buf.gait_ramping
                 } else {
                     Vec::new()
                 },

@@ -53,6 +53,11 @@ pub struct AmpConfig {
     /// of the judged steps — for demo sets with no standing clip, where a stand is told apart
     /// from every demo window however well it is done. Default true (every step judged).
     pub discriminate_stand: bool,
+    /// Whether the steps of the gait base's walk-off from rest (`[env.gait.start] seconds`) go
+    /// to the discriminator. `false`: as the stand with `discriminate_stand = false`, they stay
+    /// out and are paid the judged steps' mean style — for demo sets with no clip that starts
+    /// from a stand. Default true (so in configs and checkpoints written before it).
+    pub discriminate_ramp: bool,
 }
 
 impl Default for AmpConfig {
@@ -82,6 +87,7 @@ impl Default for AmpConfig {
             style_cap_floor: None,
             demo_weights: lhm_sim::motion::SourceWeights::default(),
             discriminate_stand: true,
+            discriminate_ramp: true,
         }
     }
 }

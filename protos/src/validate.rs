@@ -123,6 +123,9 @@ pub(crate) fn trajectory_chunk(m: &TrajectoryChunk) -> Result {
     if !m.gait_stopped.is_empty() {
         c.len("gait_stopped", m.gait_stopped.len(), n)?;
     }
+    if !m.gait_ramping.is_empty() {
+        c.len("gait_ramping", m.gait_ramping.len(), n)?;
+    }
 
     c.finite("observations", &m.observations)?;
     c.finite("actions", &m.actions)?;

@@ -134,9 +134,13 @@ fn chunk_shape_mismatches_are_rejected() {
     let mut m = c();
     m.gait_stopped.pop();
     assert_invalid(m, "gait_stopped");
+    let mut m = c();
+    m.gait_ramping.push(true);
+    assert_invalid(m, "gait_ramping");
     // No gait: no flags at all is valid.
     let m = TrajectoryChunk {
         gait_stopped: vec![],
+        gait_ramping: vec![],
         ..c()
     };
     let decoded = TrajectoryChunk::decode_checked(&m.encode_to_vec());

@@ -922,6 +922,19 @@ impl TaskEnv {
         self.gait.as_ref().is_some_and(|g| g.stopped)
     }
 
+    /// Whether the last step's targets were the gait's walk-off from rest (the first
+    /// `[env.gait.start] seconds` of a start at rest or of a walk on after a pause), and it had not
+    /// stopped; false without a gait or on a walking start.
+    pub fn gait_ramping(&self) -> bool {
+        let (Some(run), Some(config)) = (&self.gait, &self.config.gait) else {
+            return false;
+        };
+        // `gait_targets` runs before the step count moves on: the last step's clock is one back.
+        let elapsed = self.steps.saturating_sub(1).saturating_sub(run.started_at) as f32
+            / self.world.config.control_hz;
+        !run.stopped && run.from_rest && elapsed < config.start.seconds
+    }
+
     /// Whether a gait runs this episode (walking or stopped).
     pub fn gait_running(&self) -> bool {
         self.gait.is_some()

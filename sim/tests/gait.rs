@@ -545,6 +545,39 @@ fn the_env_says_when_its_gait_has_stopped() {
 }
 
 #[test]
+fn the_env_says_while_its_gait_walks_off_from_rest() {
+    let model = CharacterModel::amp_humanoid();
+    let zero = vec![0.0; model.dofs.len()];
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let mut gait = GaitConfig::default();
+    gait.start.seconds = 0.5;
+    let mut env = gait_env(&model, Some(gait.clone()));
+    assert!(!env.gait_ramping(), "no gait started yet");
+    let yaw = env.yaw_toward_first_object();
+    assert!(env.start_at_rest_in_gait(Arc::clone(&reference), 0, yaw));
+    let ramping: Vec<bool> = (0..30)
+        .map(|_| {
+            env.step(&zero);
+            env.gait_ramping()
+        })
+        .collect();
+    // 0.5 s of ramp: the targets of the first 0.5 s × control rate steps are the ramp's.
+    let ramp_steps = (0.5 * env.world.config.control_hz).round() as usize;
+    assert!(ramp_steps > 0 && ramp_steps < ramping.len());
+    assert!(ramping[..ramp_steps].iter().all(|&r| r), "{ramping:?}");
+    assert!(!ramping[ramp_steps..].iter().any(|&r| r), "{ramping:?}");
+    // A walking start never ramps.
+    let mut walking = gait_env(&model, Some(gait));
+    let yaw = walking.yaw_toward_first_object();
+    assert!(walking.start_in_gait(&demo, reference, 9, yaw));
+    for _ in 0..5 {
+        walking.step(&zero);
+        assert!(walking.gait_running() && !walking.gait_ramping());
+    }
+}
+
+#[test]
 fn with_stand_seconds_the_episode_is_truncated_that_long_after_the_stop() {
     let model = CharacterModel::amp_humanoid();
     let end = |stand_seconds: f32| {

@@ -109,10 +109,35 @@ pub fn episode_summary(chunks: &[TrajectoryChunk]) -> EpisodeSummary {
     summary
 }
 
-/// Whether step `t` of `chunk` goes to the discriminator: every step, unless `skip_stand` and
-/// the gait had stopped by then (`[amp] discriminate_stand = false`).
-fn judged(chunk: &TrajectoryChunk, t: usize, skip_stand: bool) -> bool {
-    !(skip_stand && chunk.gait_stopped.get(t).copied().unwrap_or(false))
+/// Which of the gait's steps stay out of the discriminator: the stand after its stop
+/// (`[amp] discriminate_stand = false`) and its walk-off from rest (`discriminate_ramp = false`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Skip {
+    stand: bool,
+    ramp: bool,
+}
+
+impl Skip {
+    fn of(amp: &AmpTrainer) -> Self {
+        Self {
+            stand: !amp.config.discriminate_stand,
+            ramp: !amp.config.discriminate_ramp,
+        }
+    }
+
+    fn any(self) -> bool {
+        self.stand || self.ramp
+    }
+}
+
+/// Whether step `t` of `chunk` goes to the discriminator: every step, unless `skip` leaves out
+/// the gait's stand and the chunk says it had stopped by then, or its walk-off from rest and the
+/// chunk says it ramped then.
+fn judged(chunk: &TrajectoryChunk, t: usize, skip: Skip) -> bool {
+    let flag = |flags: &[bool]| flags.get(t).copied().unwrap_or(false);
+    let left_out =
+        (skip.stand && flag(&chunk.gait_stopped)) || (skip.ramp && flag(&chunk.gait_ramping));
+    !left_out
 }
 
 /// The style rewards of a batch's chunks.
@@ -126,12 +151,12 @@ struct ChunkStyles {
 }
 
 /// Each chunk's style reward per step, with the steps the discriminator does not judge
-/// (`skip_stand`) paid the mean style of those it does, so leaving a stand out makes it neither
-/// cheaper nor dearer than walking.
+/// (`skip`) paid the mean style of those it does, so leaving a stand or a walk-off out makes it
+/// neither cheaper nor dearer than walking.
 fn chunk_styles(
     chunks: &[TrajectoryChunk],
     amp: &AmpTrainer,
-    skip_stand: bool,
+    skip: Skip,
 ) -> LearnerResult<ChunkStyles> {
     let mut styles = Vec::with_capacity(chunks.len());
     let (mut sum, mut count) = (0f64, 0u64);
@@ -142,14 +167,14 @@ fn chunk_styles(
         }
         let style = amp.style_rewards(&c.amp_features)?;
         for (t, &x) in style.iter().enumerate() {
-            if judged(c, t, skip_stand) {
+            if judged(c, t, skip) {
                 sum += x as f64;
                 count += 1;
             }
         }
         styles.push(Some(style));
     }
-    if skip_stand {
+    if skip.any() {
         let fill = if count > 0 {
             (sum / count as f64) as f32
         } else {
@@ -157,7 +182,7 @@ fn chunk_styles(
         };
         for (c, style) in chunks.iter().zip(&mut styles) {
             for (t, x) in style.iter_mut().flatten().enumerate() {
-                if !judged(c, t, skip_stand) {
+                if !judged(c, t, skip) {
                     *x = fill;
                 }
             }
@@ -178,9 +203,9 @@ pub fn assemble(
     let mut batch = PpoBatch::default();
     let mut amp_features = Vec::new();
     let mut summary = episode_summary(chunks);
-    let skip_stand = amp.is_some_and(|a| !a.config.discriminate_stand);
+    let skip = amp.map(Skip::of).unwrap_or_default();
     let styles = match amp {
-        Some(amp) => chunk_styles(chunks, amp, skip_stand)?,
+        Some(amp) => chunk_styles(chunks, amp, skip)?,
         None => ChunkStyles {
             per_chunk: vec![None; chunks.len()],
             ..ChunkStyles::default()
@@ -191,7 +216,7 @@ pub fn assemble(
             (Some(amp), Some(style)) => {
                 let dim = c.amp_dim as usize;
                 for (t, row) in c.amp_features.chunks_exact(dim).enumerate() {
-                    if judged(c, t, skip_stand) {
+                    if judged(c, t, skip) {
                         amp_features.extend_from_slice(row);
                     }
                 }
@@ -240,6 +265,11 @@ mod tests {
     /// One env's 4 steps of 2 AMP features each, row t = (t, -t) + offset; the gait stops from
     /// step `stop_from` on (`None`: no gait flags).
     fn chunk(offset: f32, stop_from: Option<usize>) -> TrajectoryChunk {
+        ramping_chunk(offset, stop_from, 0)
+    }
+
+    /// [`chunk`] whose gait walks off from rest in its first `ramp_steps` steps.
+    fn ramping_chunk(offset: f32, stop_from: Option<usize>, ramp_steps: usize) -> TrajectoryChunk {
         let n = 4usize;
         TrajectoryChunk {
             run_id: "r".into(),
@@ -260,15 +290,25 @@ mod tests {
                 .flat_map(|t| [t as f32 + offset, -(t as f32) - offset])
                 .collect(),
             gait_stopped: stop_from.map_or(vec![], |s| (0..n).map(|t| t >= s).collect()),
+            gait_ramping: if ramp_steps > 0 {
+                (0..n).map(|t| t < ramp_steps).collect()
+            } else {
+                vec![]
+            },
             ..TrajectoryChunk::versioned()
         }
     }
 
     fn trainer(discriminate_stand: bool) -> AmpTrainer {
+        judging_trainer(discriminate_stand, true)
+    }
+
+    fn judging_trainer(discriminate_stand: bool, discriminate_ramp: bool) -> AmpTrainer {
         let config = AmpConfig {
             disc: MlpConfig::with_hidden(&[8]),
             normalize_features: false,
             discriminate_stand,
+            discriminate_ramp,
             ..AmpConfig::default()
         };
         AmpTrainer::new(2, config).unwrap()
@@ -293,7 +333,7 @@ mod tests {
         let style = amp.style_rewards(&judged).unwrap();
         let mean = style.iter().sum::<f32>() / style.len() as f32;
         assert!((out.summary.mean_style_reward as f32 - mean).abs() < 1e-5);
-        let styles = chunk_styles(&chunks, &amp, true).unwrap();
+        let styles = chunk_styles(&chunks, &amp, Skip::of(&amp)).unwrap();
         assert_eq!(styles.judged_steps, 6);
         let first = styles.per_chunk[0].as_ref().unwrap();
         assert!((first[2] - mean).abs() < 1e-6 && (first[3] - mean).abs() < 1e-6);
@@ -311,5 +351,37 @@ mod tests {
         let style = amp.style_rewards(&all).unwrap();
         let mean = style.iter().sum::<f32>() / style.len() as f32;
         assert!((out.summary.mean_style_reward as f32 - mean).abs() < 1e-5);
+    }
+
+    #[test]
+    fn walk_off_steps_stay_out_when_asked_and_are_paid_the_judged_mean() {
+        // First chunk: ramps in steps 0-1, stops from step 3; second: no gait flags.
+        let chunks = [ramping_chunk(0.0, Some(3), 2), chunk(10.0, None)];
+        let amp = judging_trainer(false, false);
+        let out = assemble(&chunks, Some(&amp), GAE).unwrap();
+        // Only step 2 of the first chunk is judged, then the whole second chunk.
+        let judged: Vec<f32> = [2.0f32, 10.0, 11.0, 12.0, 13.0]
+            .iter()
+            .flat_map(|&x| [x, -x])
+            .collect();
+        assert_eq!(out.amp_features, judged);
+        let style = amp.style_rewards(&judged).unwrap();
+        let mean = style.iter().sum::<f32>() / style.len() as f32;
+        let styles = chunk_styles(&chunks, &amp, Skip::of(&amp)).unwrap();
+        assert_eq!(styles.judged_steps, 5);
+        let first = styles.per_chunk[0].as_ref().unwrap();
+        for t in [0, 1, 3] {
+            assert!(
+                (first[t] - mean).abs() < 1e-6,
+                "step {t}: {} vs {mean}",
+                first[t]
+            );
+        }
+        assert_eq!(first[2], style[0]);
+        // The walk-off judged as before when only the stand is left out.
+        let stand_only = judging_trainer(false, true);
+        let out = assemble(&chunks, Some(&stand_only), GAE).unwrap();
+        assert_eq!(out.amp_features.len(), (3 + 4) * 2);
+        assert_eq!(out.amp_features[..6], chunks[0].amp_features[..6]);
     }
 }

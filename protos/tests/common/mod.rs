@@ -81,6 +81,7 @@ pub fn sample_chunk() -> TrajectoryChunk {
         truncation_values,
         amp_features: rng.floats(n * AMP_DIM as usize, 2.0),
         gait_stopped: (0..n).map(|t| t >= 24).collect(),
+        gait_ramping: (0..n).map(|t| t < 6).collect(),
         bootstrap_value: 3.5,
         episodes: vec![EpisodeStats {
             episode_return: 12.75,
