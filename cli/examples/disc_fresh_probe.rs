@@ -15,13 +15,11 @@
 //! the policy's residual on the joints whose name contains `abdomen` by 0.5 while playing.
 #[path = "shared/gait_run.rs"]
 mod gait_run;
-use gait_run::GaitRun;
-use lhm_actor::eval::{EvalSetup, GaitStart};
+use gait_run::{scale_residual, GaitRun};
 use lhm_learner::amp::{AmpConfig, AmpTrainer};
 use lhm_nets::SplitMix64;
 use lhm_scenes::Split;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 /// Agent rows per update: about the judged rows of one 4,096-sample iteration.
 const AGENT_ROWS: usize = 2048;
@@ -133,14 +131,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         None => (None, &args[5..]),
     };
+    let run = GaitRun::load(&dir, "checkpoint")?;
     let GaitRun {
         config,
         learner,
         model,
         bench,
         demo,
-        reference,
-    } = GaitRun::load(&dir, "checkpoint")?;
+        ..
+    } = &run;
     let run_amp = learner
         .amp
         .as_ref()
@@ -163,21 +162,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut episodes, mut falls) = (0usize, 0usize);
     let mut act_rng = SplitMix64::new(11);
     for rest in [true, false] {
-        let setup = EvalSetup {
-            model: &model,
-            catalogue: &bench.catalogue,
-            sim: &config.sim,
-            env: &config.env,
-            batch: 1,
-            language: false,
-            gait: Some(GaitStart {
-                demo: &demo,
-                reference: Arc::clone(&reference),
-                rest,
-            }),
-            max_steps: Some(300),
-            action_std: 0.0,
-        };
+        let setup = run.eval_setup(rest);
         for task in &train_tasks {
             for seed in 0..seeds {
                 let mut env = setup.env_for(task, seed);
@@ -190,13 +175,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     } else {
                         learner.actor_critic.act_deterministic(&obs)?
                     };
-                    if let Some((joint, k)) = &scaled {
-                        for (x, dof) in a.iter_mut().zip(&model.dofs) {
-                            if dof.name.contains(joint.as_str()) {
-                                *x *= k;
-                            }
-                        }
-                    }
+                    scale_residual(&mut a, model, scaled.as_ref());
                     let r = env.step(&a);
                     episode.push((env.gait_stopped(), env.gait_ramping(), env.amp_features()));
                     if r.done || r.truncated || r.physics_invalid {

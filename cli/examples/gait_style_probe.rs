@@ -10,14 +10,12 @@
 //! Also prints how many episodes fell.
 #[path = "shared/gait_run.rs"]
 mod gait_run;
-use gait_run::GaitRun;
-use lhm_actor::eval::{EvalSetup, GaitStart};
+use gait_run::{scale_residual, GaitRun};
 use lhm_nets::SplitMix64;
 use lhm_scenes::Split;
 use lhm_sim::mjcf::JointKind;
 use lhm_sim::obs::amp_frame_dim;
 use std::path::PathBuf;
-use std::sync::Arc;
 
 const FALL_TAIL: usize = 15;
 
@@ -43,14 +41,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Some((joint.to_string(), k.parse().map_err(|_| bad())?))
         }
     };
+    let run = GaitRun::load(&dir, "checkpoint")?;
     let GaitRun {
-        config,
         learner,
         model,
         bench,
         demo,
-        reference,
-    } = GaitRun::load(&dir, "checkpoint")?;
+        ..
+    } = &run;
     let amp = learner
         .amp
         .as_ref()
@@ -71,34 +69,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut groups: [Vec<f32>; 3] = Default::default();
     let (mut episodes, mut falls) = (0usize, 0usize);
     for rest in [true, false] {
-        let setup = EvalSetup {
-            model: &model,
-            catalogue: &bench.catalogue,
-            sim: &config.sim,
-            env: &config.env,
-            batch: 1,
-            language: false,
-            gait: Some(GaitStart {
-                demo: &demo,
-                reference: Arc::clone(&reference),
-                rest,
-            }),
-            max_steps: Some(300),
-            action_std: 0.0,
-        };
+        let setup = run.eval_setup(rest);
         for task in &unseen {
             for seed in 0..seeds {
                 let mut env = setup.env_for(task, seed);
                 let mut episode: Vec<(bool, Vec<f32>)> = Vec::new();
                 let fell = loop {
                     let mut a = learner.actor_critic.act_deterministic(&env.observation())?;
-                    if let Some((joint, k)) = &scaled {
-                        for (x, dof) in a.iter_mut().zip(&model.dofs) {
-                            if dof.name.contains(joint.as_str()) {
-                                *x *= k;
-                            }
-                        }
-                    }
+                    scale_residual(&mut a, model, scaled.as_ref());
                     let r = env.step(&a);
                     episode.push((env.gait_stopped(), env.amp_features()));
                     if r.done || r.truncated || r.physics_invalid {
@@ -146,7 +124,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         report(name, rows)?;
     }
     // Which features the stand differs on, in the clips' standard deviations.
-    let frame = amp_frame_dim(&model);
+    let frame = amp_frame_dim(model);
     let stats = |rows: &[f32]| -> (Vec<f64>, Vec<f64>) {
         let n = (rows.len() / width).max(1) as f64;
         let mut m = vec![0.0f64; width];

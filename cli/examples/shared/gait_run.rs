@@ -1,6 +1,7 @@
 //! What the `[env.gait]` diagnostics (`gait_style_probe`, `fall_trace`) load from a run directory:
 //! its configuration, its learner, the clips and the gait's cycle. Included with `#[path]`; not an
 //! example of its own.
+use lhm_actor::eval::{EvalSetup, GaitStart};
 use lhm_learner::service::TrainConfig;
 use lhm_learner::Learner;
 use lhm_scenes::Benchmark;
@@ -55,5 +56,41 @@ impl GaitRun {
             demo,
             reference,
         })
+    }
+}
+
+impl GaitRun {
+    /// How the diagnostics play the run: one environment, episodes of at most 300 steps, no
+    /// language, starting at rest (`rest`) or walking as `lhm eval` starts them.
+    #[allow(dead_code)] // not every diagnostic that includes this file plays episodes this way
+    pub fn eval_setup(&self, rest: bool) -> EvalSetup<'_> {
+        EvalSetup {
+            model: &self.model,
+            catalogue: &self.bench.catalogue,
+            sim: &self.config.sim,
+            env: &self.config.env,
+            batch: 1,
+            language: false,
+            gait: Some(GaitStart {
+                demo: &self.demo,
+                reference: Arc::clone(&self.reference),
+                rest,
+            }),
+            max_steps: Some(300),
+            action_std: 0.0,
+        }
+    }
+}
+
+/// Multiplies the policy's residual on the joints whose name contains `scaled.0` by `scaled.1`
+/// (an empty name: every joint, so `k = 0` leaves the gait base alone).
+#[allow(dead_code)] // not every diagnostic that includes this file scales the residual
+pub fn scale_residual(actions: &mut [f32], model: &CharacterModel, scaled: Option<&(String, f32)>) {
+    if let Some((joint, k)) = scaled {
+        for (x, dof) in actions.iter_mut().zip(&model.dofs) {
+            if dof.name.contains(joint.as_str()) {
+                *x *= k;
+            }
+        }
     }
 }
