@@ -11,7 +11,7 @@
 //! data, the training run's discriminator cannot either.
 //! `cargo run --release -p lhm-cli --example disc_fresh_probe -- RUN_DIR TASKS SEEDS noise|mean
 //! UPDATES [scale=JOINT:K] VARIANT...` with VARIANT a comma-separated list of `gp=X`,
-//! `logit_reg=X`, `lr=X`, `wd=X` (`base`: the run's own settings); `scale=abdomen:0.5` multiplies
+//! `logit_reg=X`, `lr=X`, `wd=X`, `noise=TARGET` (instance noise steered to that accuracy) (`base`: the run's own settings); `scale=abdomen:0.5` multiplies
 //! the policy's residual on the joints whose name contains `abdomen` by 0.5 while playing.
 #[path = "shared/gait_run.rs"]
 mod gait_run;
@@ -83,7 +83,9 @@ fn variant(base: &AmpConfig, spec: &str) -> Result<AmpConfig, String> {
         return Ok(c);
     }
     for kv in spec.split(',') {
-        let bad = || format!("{kv:?}: a variant's entries are gp=X, logit_reg=X, lr=X or wd=X");
+        let bad = || {
+            format!("{kv:?}: a variant's entries are gp=X, logit_reg=X, lr=X, wd=X or noise=TARGET_ACCURACY")
+        };
         let (k, v) = kv.split_once('=').ok_or_else(bad)?;
         let v: f64 = v.parse().map_err(|_| bad())?;
         match k {
@@ -91,6 +93,12 @@ fn variant(base: &AmpConfig, spec: &str) -> Result<AmpConfig, String> {
             "logit_reg" => c.logit_reg = v,
             "lr" => c.adam.lr = v,
             "wd" => c.weight_decay = v,
+            "noise" => {
+                c.instance_noise = Some(lhm_learner::InstanceNoise {
+                    target_accuracy: v,
+                    ..Default::default()
+                })
+            }
             _ => return Err(bad()),
         }
     }
@@ -230,6 +238,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{:<28} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "variant", "update", "train", "train demo", "train agnt", "held demo", "held agnt"
     );
+    println!("(train: the update's own accuracy, on noisy inputs under noise=; the rest on clean rows; then noise std and the held-out agent's mean style reward)");
     for (name, c) in &variants {
         let mut amp = AmpTrainer::new(dim, c.clone())?;
         let mut rng = SplitMix64::new(3);
@@ -240,9 +249,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if u % REPORT_EVERY == 0 || u == updates {
                 let (train_demo, train_agent) = amp.accuracy(&halves[0], &demo_rows)?;
                 let (held_demo, held_agent) = amp.accuracy(&halves[1], &demo_held)?;
+                let style = amp.style_rewards(&halves[1])?;
+                let style = style.iter().map(|&r| f64::from(r)).sum::<f64>() / style.len() as f64;
                 println!(
-                    "{name:<28} {u:>7} {:>10.3} {train_demo:>10.3} {train_agent:>10.3} {held_demo:>10.3} {held_agent:>10.3}",
-                    stats.accuracy()
+                    "{name:<28} {u:>7} {:>10.3} {train_demo:>10.3} {train_agent:>10.3} {held_demo:>10.3} {held_agent:>10.3} {:>6.3} {style:>6.3}",
+                    stats.accuracy(),
+                    stats.noise_std
                 );
             }
         }

@@ -11,7 +11,9 @@ pub mod sac;
 pub mod service;
 pub mod state;
 
-pub use amp::{style_reward_from_logit, AmpConfig, AmpStats, AmpTrainer, ReplayBuffer};
+pub use amp::{
+    style_reward_from_logit, AmpConfig, AmpStats, AmpTrainer, InstanceNoise, ReplayBuffer,
+};
 pub use error::{LearnerError, LearnerResult};
 pub use gae::{compute_gae, GaeInput, GaeOutput, GaeParams};
 pub use ppo::{PpoBatch, PpoConfig, PpoStats, PpoTrainer};

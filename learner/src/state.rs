@@ -57,6 +57,9 @@ struct AmpMeta {
     feature_norm: Option<RunningMeanStd>,
     replay_rows: usize,
     replay_head: usize,
+    /// The instance noise's standard deviation; absent in checkpoints from before it (0).
+    #[serde(default)]
+    noise_std: f64,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -196,6 +199,7 @@ impl Learner {
                 feature_norm: amp.feature_norm.clone(),
                 replay_rows: amp.replay.len(),
                 replay_head: amp.replay.head(),
+                noise_std: amp.noise_std,
             }),
         }
     }
@@ -312,6 +316,7 @@ impl Learner {
                     amp_meta.adam_step,
                 )?;
                 amp.rng = amp_meta.rng.clone();
+                amp.noise_std = amp_meta.noise_std;
                 if amp_meta.feature_norm.as_ref().map(RunningMeanStd::dim)
                     != amp.feature_norm.as_ref().map(RunningMeanStd::dim)
                 {

@@ -4,7 +4,9 @@
 
 use std::path::PathBuf;
 
-use lhm_learner::{AmpConfig, AmpSetup, Learner, LearnerConfig, LearnerError, PpoBatch, PpoConfig};
+use lhm_learner::{
+    AmpConfig, AmpSetup, InstanceNoise, Learner, LearnerConfig, LearnerError, PpoBatch, PpoConfig,
+};
 use lhm_nets::checkpoint::CheckpointError;
 use lhm_nets::{ActorCriticConfig, LogStd, MlpConfig, SplitMix64};
 
@@ -19,6 +21,11 @@ fn config() -> LearnerConfig {
 
 /// [`config`] with the replay buffer keeping `keep` of each rollout's agent rows.
 fn config_keeping(keep: f64) -> LearnerConfig {
+    config_with(keep, None)
+}
+
+/// [`config_keeping`] with the discriminator trained under `noise`.
+fn config_with(keep: f64, noise: Option<InstanceNoise>) -> LearnerConfig {
     let mut actor_critic = ActorCriticConfig::with_hidden(&[32, 32]);
     actor_critic.policy.log_std = LogStd::Learned(-1.0);
     // The value normaliser's statistics must survive the checkpoint too.
@@ -42,6 +49,7 @@ fn config_keeping(keep: f64) -> LearnerConfig {
                 replay_capacity: 150,
                 replay_keep_fraction: keep,
                 seed: 23,
+                instance_noise: noise,
                 ..AmpConfig::default()
             },
         }),
@@ -111,9 +119,30 @@ fn resumed_run_keeping_part_of_each_rollout_matches_bit_for_bit() {
     resume_matches_uninterrupted(0.6, "exact-keep");
 }
 
+#[test]
+fn resumed_run_with_instance_noise_matches_bit_for_bit() {
+    // The noise is drawn from the discriminator's RNG and its standard deviation is steered
+    // after each update: both must come back from the checkpoint. A low target and a big step
+    // make the noise non-zero from the second update on.
+    let noise = InstanceNoise {
+        target_accuracy: 0.51,
+        step: 0.5,
+        max_std: 4.0,
+    };
+    let config = || config_with(1.0, Some(noise.clone()));
+    let learner = resume_matches(config, "exact-noise");
+    let std = learner.amp.as_ref().unwrap().noise_std;
+    assert!(std > 0.0, "the noise was on: {std}");
+}
+
 fn resume_matches_uninterrupted(keep: f64, name: &str) {
+    resume_matches(|| config_keeping(keep), name);
+}
+
+/// Runs K updates, saves, resumes and runs one more against K+1 straight; returns the straight
+/// learner.
+fn resume_matches(config: impl Fn() -> LearnerConfig, name: &str) -> Learner {
     const K: u64 = 3;
-    let config = || config_keeping(keep);
     let dir = scratch(name);
     let mut interrupted = Learner::new(config()).unwrap();
     for k in 0..K {
@@ -181,6 +210,7 @@ fn resume_matches_uninterrupted(keep: f64, name: &str) {
         K + 1
     );
     let _ = std::fs::remove_dir_all(&dir);
+    straight
 }
 
 #[test]
