@@ -11,7 +11,7 @@
 //! data, the training run's discriminator cannot either.
 //! `cargo run --release -p lhm-cli --example disc_fresh_probe -- RUN_DIR TASKS SEEDS noise|mean
 //! UPDATES [scale=JOINT:K] VARIANT...` with VARIANT a comma-separated list of `gp=X`,
-//! `logit_reg=X`, `lr=X`, `wd=X`, `noise=TARGET` (instance noise steered to that accuracy) (`base`: the run's own settings); `scale=abdomen:0.5` multiplies
+//! `logit_reg=X`, `lr=X`, `wd=X`, `target=X` (the rate steered to that accuracy) (`base`: the run's own settings); `scale=abdomen:0.5` multiplies
 //! the policy's residual on the joints whose name contains `abdomen` by 0.5 while playing.
 #[path = "shared/gait_run.rs"]
 mod gait_run;
@@ -84,7 +84,9 @@ fn variant(base: &AmpConfig, spec: &str) -> Result<AmpConfig, String> {
     }
     for kv in spec.split(',') {
         let bad = || {
-            format!("{kv:?}: a variant's entries are gp=X, logit_reg=X, lr=X, wd=X or noise=TARGET_ACCURACY")
+            format!(
+                "{kv:?}: a variant's entries are gp=X, logit_reg=X, lr=X, wd=X or target=ACCURACY"
+            )
         };
         let (k, v) = kv.split_once('=').ok_or_else(bad)?;
         let v: f64 = v.parse().map_err(|_| bad())?;
@@ -93,9 +95,9 @@ fn variant(base: &AmpConfig, spec: &str) -> Result<AmpConfig, String> {
             "logit_reg" => c.logit_reg = v,
             "lr" => c.adam.lr = v,
             "wd" => c.weight_decay = v,
-            "noise" => {
-                c.instance_noise = Some(lhm_learner::InstanceNoise {
-                    target_accuracy: v,
+            "target" => {
+                c.accuracy_target = Some(lhm_learner::AccuracyTarget {
+                    accuracy: v,
                     ..Default::default()
                 })
             }
@@ -238,7 +240,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{:<28} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "variant", "update", "train", "train demo", "train agnt", "held demo", "held agnt"
     );
-    println!("(train: the update's own accuracy, on noisy inputs under noise=; the rest on clean rows; then noise std and the held-out agent's mean style reward)");
+    println!("(train: the update's own accuracy; then the discriminator's rate and the held-out agent's mean style reward)");
     for (name, c) in &variants {
         let mut amp = AmpTrainer::new(dim, c.clone())?;
         let mut rng = SplitMix64::new(3);
@@ -254,7 +256,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 println!(
                     "{name:<28} {u:>7} {:>10.3} {train_demo:>10.3} {train_agent:>10.3} {held_demo:>10.3} {held_agent:>10.3} {:>6.3} {style:>6.3}",
                     stats.accuracy(),
-                    stats.noise_std
+                    stats.lr
                 );
             }
         }

@@ -43,12 +43,7 @@ const PANELS: &[(&str, &str)] = &[
         "disc_agent_accuracy",
         "discriminator accuracy on agent windows",
     ),
-    // Under `[amp.instance_noise]`: the accuracy on the clean rows and the noise's std.
-    (
-        "disc_clean_accuracy",
-        "discriminator accuracy without instance noise",
-    ),
-    ("disc_noise_std", "instance noise std (normalised units)"),
+    ("disc_lr", "discriminator learning rate"),
     ("style_reward", "style reward"),
     ("task_reward", "task reward"),
     ("samples_per_s", "samples/s"),

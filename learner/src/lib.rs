@@ -12,7 +12,7 @@ pub mod service;
 pub mod state;
 
 pub use amp::{
-    style_reward_from_logit, AmpConfig, AmpStats, AmpTrainer, InstanceNoise, ReplayBuffer,
+    style_reward_from_logit, AccuracyTarget, AmpConfig, AmpStats, AmpTrainer, ReplayBuffer,
 };
 pub use error::{LearnerError, LearnerResult};
 pub use gae::{compute_gae, GaeInput, GaeOutput, GaeParams};

@@ -57,9 +57,10 @@ struct AmpMeta {
     feature_norm: Option<RunningMeanStd>,
     replay_rows: usize,
     replay_head: usize,
-    /// The instance noise's standard deviation; absent in checkpoints from before it (0).
+    /// The discriminator's learning rate now (differs from the configured one under
+    /// `accuracy_target`); absent in older checkpoints, which had a constant rate.
     #[serde(default)]
-    noise_std: f64,
+    lr: Option<f64>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -199,7 +200,7 @@ impl Learner {
                 feature_norm: amp.feature_norm.clone(),
                 replay_rows: amp.replay.len(),
                 replay_head: amp.replay.head(),
-                noise_std: amp.noise_std,
+                lr: Some(amp.adam.config.lr),
             }),
         }
     }
@@ -316,7 +317,9 @@ impl Learner {
                     amp_meta.adam_step,
                 )?;
                 amp.rng = amp_meta.rng.clone();
-                amp.noise_std = amp_meta.noise_std;
+                if let Some(lr) = amp_meta.lr {
+                    amp.adam.config.lr = lr;
+                }
                 if amp_meta.feature_norm.as_ref().map(RunningMeanStd::dim)
                     != amp.feature_norm.as_ref().map(RunningMeanStd::dim)
                 {

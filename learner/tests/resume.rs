@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use lhm_learner::{
-    AmpConfig, AmpSetup, InstanceNoise, Learner, LearnerConfig, LearnerError, PpoBatch, PpoConfig,
+    AccuracyTarget, AmpConfig, AmpSetup, Learner, LearnerConfig, LearnerError, PpoBatch, PpoConfig,
 };
 use lhm_nets::checkpoint::CheckpointError;
 use lhm_nets::{ActorCriticConfig, LogStd, MlpConfig, SplitMix64};
@@ -24,8 +24,8 @@ fn config_keeping(keep: f64) -> LearnerConfig {
     config_with(keep, None)
 }
 
-/// [`config_keeping`] with the discriminator trained under `noise`.
-fn config_with(keep: f64, noise: Option<InstanceNoise>) -> LearnerConfig {
+/// [`config_keeping`] with the discriminator's rate steered by `target`.
+fn config_with(keep: f64, target: Option<AccuracyTarget>) -> LearnerConfig {
     let mut actor_critic = ActorCriticConfig::with_hidden(&[32, 32]);
     actor_critic.policy.log_std = LogStd::Learned(-1.0);
     // The value normaliser's statistics must survive the checkpoint too.
@@ -49,7 +49,7 @@ fn config_with(keep: f64, noise: Option<InstanceNoise>) -> LearnerConfig {
                 replay_capacity: 150,
                 replay_keep_fraction: keep,
                 seed: 23,
-                instance_noise: noise,
+                accuracy_target: target,
                 ..AmpConfig::default()
             },
         }),
@@ -120,19 +120,22 @@ fn resumed_run_keeping_part_of_each_rollout_matches_bit_for_bit() {
 }
 
 #[test]
-fn resumed_run_with_instance_noise_matches_bit_for_bit() {
-    // The noise is drawn from the discriminator's RNG and its standard deviation is steered
-    // after each update: both must come back from the checkpoint. A low target and a big step
-    // make the noise non-zero from the second update on.
-    let noise = InstanceNoise {
-        target_accuracy: 0.51,
-        step: 0.5,
-        max_std: 4.0,
+fn resumed_run_with_a_steered_discriminator_rate_matches_bit_for_bit() {
+    // The rate is steered after each update and must come back from the checkpoint; a low
+    // target makes it fall from the first update on.
+    let target = AccuracyTarget {
+        accuracy: 0.51,
+        factor: 2.0,
+        min_lr_fraction: 1e-3,
     };
-    let config = || config_with(1.0, Some(noise.clone()));
-    let learner = resume_matches(config, "exact-noise");
-    let std = learner.amp.as_ref().unwrap().noise_std;
-    assert!(std > 0.0, "the noise was on: {std}");
+    let config = || config_with(1.0, Some(target.clone()));
+    let learner = resume_matches(config, "exact-steered");
+    let amp = learner.amp.as_ref().unwrap();
+    assert!(
+        amp.adam.config.lr < amp.config.adam.lr,
+        "the rate was steered: {}",
+        amp.adam.config.lr
+    );
 }
 
 fn resume_matches_uninterrupted(keep: f64, name: &str) {

@@ -62,12 +62,8 @@ pub const COLUMNS: &[&str] = &[
     "disc_agent_logit",
     "disc_bce_loss",
     "disc_grad_penalty",
-    // Instance noise (`[amp.instance_noise]`): its standard deviation in the update, and the
-    // accuracy on the same rows without it (equal to the columns above when there is none).
-    "disc_noise_std",
-    "disc_clean_accuracy",
-    "disc_clean_demo_accuracy",
-    "disc_clean_agent_accuracy",
+    // The discriminator's learning rate in the update (steered under `[amp.accuracy_target]`).
+    "disc_lr",
 ];
 
 pub struct MetricsCsv {

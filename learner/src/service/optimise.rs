@@ -185,22 +185,7 @@ fn ppo_amp(
             ),
             metric("disc_bce_loss", "amp/bce_loss", a.bce_loss),
             metric("disc_grad_penalty", "amp/grad_penalty", a.grad_penalty),
-            metric("disc_noise_std", "amp/noise_std", a.noise_std),
-            metric(
-                "disc_clean_accuracy",
-                "amp/clean_accuracy",
-                a.clean_accuracy(),
-            ),
-            metric(
-                "disc_clean_demo_accuracy",
-                "amp/clean_demo_accuracy",
-                a.clean_demo_accuracy,
-            ),
-            metric(
-                "disc_clean_agent_accuracy",
-                "amp/clean_agent_accuracy",
-                a.clean_agent_accuracy,
-            ),
+            metric("disc_lr", "amp/lr", a.lr),
         ]);
     }
     Ok(Update {
