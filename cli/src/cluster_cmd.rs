@@ -724,7 +724,11 @@ mod tests {
         assert!(last.amp_active);
         assert_eq!(last.log_std, Some(-4.5));
         assert_eq!(built_in.amp.grad_penalty, 50.0);
-        let target = built_in.amp.accuracy_target.as_ref().expect("accuracy target");
+        let target = built_in
+            .amp
+            .accuracy_target
+            .as_ref()
+            .expect("accuracy target");
         assert_eq!(target.accuracy, 0.8);
         // Stages 4 and 5 keep σ e^−4 (the line's walk-way-std40-long and feet-down runs).
         let before_amp = built_in.stage_at(12_899).expect("stage at 12,899");
