@@ -11,8 +11,9 @@
 //! data, the training run's discriminator cannot either.
 //! `cargo run --release -p lhm-cli --example disc_fresh_probe -- RUN_DIR TASKS SEEDS noise|mean
 //! UPDATES [scale=JOINT:K] VARIANT...` with VARIANT a comma-separated list of `gp=X`,
-//! `logit_reg=X`, `lr=X`, `wd=X`, `target=X` (the rate steered to that accuracy) (`base`: the run's own settings); `scale=abdomen:0.5` multiplies
-//! the policy's residual on the joints whose name contains `abdomen` by 0.5 while playing.
+//! `logit_reg=X`, `lr=X`, `wd=X`, `target=X` (the rate steered to that accuracy) (`base`: the
+//! run's own settings); `scale=abdomen:0.5` multiplies the policy's residual on the joints whose
+//! name contains `abdomen` by 0.5 while playing.
 #[path = "shared/gait_run.rs"]
 mod gait_run;
 use gait_run::{scale_residual, GaitRun};

@@ -577,12 +577,7 @@ impl AmpTrainer {
         }
         self.push_replay(agent);
         let k = sums.minibatches as f64;
-        let lr = self.adam.config.lr;
-        if let Some(target) = &self.config.accuracy_target {
-            let accuracy = 0.5 * (sums.demo_accuracy + sums.agent_accuracy) / k;
-            self.adam.config.lr = target.next_lr(lr, accuracy, self.config.adam.lr);
-        }
-        Ok(AmpStats {
+        let stats = AmpStats {
             bce_loss: sums.bce_loss / k,
             grad_penalty: sums.grad_penalty / k,
             logit_reg: sums.logit_reg / k,
@@ -593,8 +588,12 @@ impl AmpTrainer {
             agent_logit_mean: sums.agent_logit_mean / k,
             grad_norm: sums.grad_norm / k,
             minibatches: sums.minibatches,
-            lr,
-        })
+            lr: self.adam.config.lr,
+        };
+        if let Some(target) = &self.config.accuracy_target {
+            self.adam.config.lr = target.next_lr(stats.lr, stats.accuracy(), self.config.adam.lr);
+        }
+        Ok(stats)
     }
 }
 
