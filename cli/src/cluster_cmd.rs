@@ -713,7 +713,7 @@ mod tests {
         let first = built_in.stage_at(0).expect("stage at 0");
         assert_eq!(first.index, Some(0));
         assert!(!first.amp_active);
-        assert_eq!(first.log_std, Some(-3.5));
+        assert_eq!(first.log_std, Some(lhm_nets::LogStd::Fixed(-3.5)));
         let gait = first.spec.env.gait.as_ref().expect("gait");
         assert_eq!(gait.rest_start_fraction, 1.0);
         assert_eq!(gait.stop_on, lhm_sim::env::StopOn::Distance);
@@ -722,7 +722,7 @@ mod tests {
             .expect("past the schedule");
         assert_eq!(last.index, None);
         assert!(last.amp_active);
-        assert_eq!(last.log_std, Some(-4.5));
+        assert_eq!(last.log_std, Some(lhm_nets::LogStd::Fixed(-4.5)));
         assert_eq!(built_in.amp.grad_penalty, 50.0);
         let target = built_in
             .amp
@@ -733,7 +733,7 @@ mod tests {
         // Stages 4 and 5 keep σ e^−4 (the line's walk-way-std40-long and feet-down runs).
         let before_amp = built_in.stage_at(12_899).expect("stage at 12,899");
         assert_eq!(before_amp.index, Some(4));
-        assert_eq!(before_amp.log_std, Some(-4.0));
+        assert_eq!(before_amp.log_std, Some(lhm_nets::LogStd::Fixed(-4.0)));
         let gait = last.spec.env.gait.as_ref().expect("gait");
         assert_eq!(gait.stop_on, lhm_sim::env::StopOn::FeetDown);
         assert_eq!(gait.rest_start_fraction, 0.5);

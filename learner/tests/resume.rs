@@ -280,7 +280,10 @@ fn a_policy_file_records_the_noise_its_stage_set_and_the_checkpoint_the_runs() {
     let mut learner = Learner::new(config.clone()).unwrap();
     train_step(&mut learner, 0);
     // What a `[[stages]]` entry with `log_std = -3.5` does on entry.
-    learner.actor_critic.set_fixed_log_std(-3.5).unwrap();
+    learner
+        .actor_critic
+        .set_fixed_log_std(&LogStd::Fixed(-3.5))
+        .unwrap();
     let dir = scratch("stage-noise");
     learner.save(&dir.join("checkpoint")).unwrap();
     learner.save_policy(&dir.join("policy")).unwrap();

@@ -131,9 +131,9 @@ impl ActorCritic {
 
     /// Sets the policy's fixed log standard deviation, in the network and in its config (what
     /// a saved policy records); an error for a learned one.
-    pub fn set_fixed_log_std(&mut self, value: f32) -> NetResult<()> {
+    pub fn set_fixed_log_std(&mut self, value: &crate::LogStd) -> NetResult<()> {
         self.policy.set_fixed_log_std(value)?;
-        self.config.policy.log_std = crate::LogStd::Fixed(value);
+        self.config.policy.log_std = value.clone();
         Ok(())
     }
 

@@ -13,6 +13,9 @@ pub enum LogStd {
     Fixed(f32),
     /// A trained parameter per action dimension, starting at this value.
     Learned(f32),
+    /// A constant per action dimension, never trained: more exploration on some joints than on
+    /// others (e.g. the arms, which a discriminator reads and balance hardly needs).
+    PerDim(Vec<f32>),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -82,9 +85,21 @@ impl GaussianPolicy {
             dtype,
         )?;
         let init = |v: f32| Tensor::full(v, act_dim, &Device::Cpu).and_then(|t| t.to_dtype(dtype));
-        let log_std = match config.log_std {
-            LogStd::Fixed(v) => LogStdParam::Fixed(init(v)?),
-            LogStd::Learned(v) => LogStdParam::Learned(Var::from_tensor(&init(v)?)?),
+        let log_std = match &config.log_std {
+            LogStd::Fixed(v) => LogStdParam::Fixed(init(*v)?),
+            LogStd::Learned(v) => LogStdParam::Learned(Var::from_tensor(&init(*v)?)?),
+            LogStd::PerDim(values) => {
+                if values.len() != act_dim || values.iter().any(|v| !v.is_finite()) {
+                    return Err(NetError::Config(format!(
+                        "log_std per_dim: {} finite values for {act_dim} action dimensions, got \
+                         {values:?}",
+                        act_dim
+                    )));
+                }
+                LogStdParam::Fixed(
+                    Tensor::from_vec(values.clone(), act_dim, &Device::Cpu)?.to_dtype(dtype)?,
+                )
+            }
         };
         Ok(Self {
             encoder,
@@ -138,12 +153,23 @@ impl GaussianPolicy {
         Ok(quad.broadcast_sub(&norm)?)
     }
 
-    /// Replaces a fixed log standard deviation (a run's stage may change it); a learned one is
-    /// a parameter of the optimiser and is refused.
-    pub fn set_fixed_log_std(&mut self, value: f32) -> NetResult<()> {
+    /// Replaces a fixed log standard deviation with `value` (a run's stage may change it), one
+    /// for every dimension or one each; a learned one is a parameter of the optimiser and is
+    /// refused, and so is a learned `value`.
+    pub fn set_fixed_log_std(&mut self, value: &LogStd) -> NetResult<()> {
         match &mut self.log_std {
             LogStdParam::Fixed(t) => {
-                *t = Tensor::full(value, t.dims1()?, t.device())?.to_dtype(t.dtype())?;
+                let dim = t.dims1()?;
+                let values = match value {
+                    LogStd::Fixed(v) => vec![*v; dim],
+                    LogStd::PerDim(v) if v.len() == dim => v.clone(),
+                    other => {
+                        return Err(NetError::Config(format!(
+                            "cannot set the policy's {dim} fixed log_std values to {other:?}"
+                        )))
+                    }
+                };
+                *t = Tensor::from_vec(values, dim, t.device())?.to_dtype(t.dtype())?;
                 Ok(())
             }
             LogStdParam::Learned(_) => Err(NetError::Config(
@@ -265,6 +291,48 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_per_dimension_log_std_samples_each_dimension_at_its_own_spread() {
+        let mut rng = SplitMix64::new(3);
+        let cfg = |log_std| GaussianPolicyConfig {
+            mlp: MlpConfig::with_hidden(&[8]),
+            log_std,
+            output_init_scale: 0.01,
+            vla: None,
+        };
+        let policy = GaussianPolicy::new(
+            3,
+            2,
+            &cfg(LogStd::PerDim(vec![-4.5, -2.5])),
+            &mut rng,
+            DType::F32,
+        )
+        .unwrap();
+        let obs = Tensor::zeros((4000, 3), DType::F32, &Device::Cpu).unwrap();
+        let (actions, log_probs) = policy.sample(&obs, &mut rng).unwrap();
+        let mean = policy.mean(&obs).unwrap();
+        let dev: Vec<Vec<f32>> = (&actions - &mean).unwrap().to_vec2().unwrap();
+        for (k, want) in [(-4.5f32).exp(), (-2.5f32).exp()].into_iter().enumerate() {
+            let var = dev.iter().map(|r| r[k] * r[k]).sum::<f32>() / dev.len() as f32;
+            assert!(
+                (var.sqrt() / want - 1.0).abs() < 0.05,
+                "dim {k}: {}",
+                var.sqrt()
+            );
+        }
+        // log π of each draw is the two one-dimensional normal densities' logs summed.
+        let lp: Vec<f32> = log_probs.to_vec1().unwrap();
+        let one = |x: f32, ls: f32| -0.5 * (x / ls.exp()).powi(2) - ls - HALF_LN_TWO_PI as f32;
+        let want = one(dev[0][0], -4.5) + one(dev[0][1], -2.5);
+        assert!((lp[0] - want).abs() < 1e-3, "{} vs {want}", lp[0]);
+        for bad in [vec![-4.5], vec![-4.5, f32::NAN]] {
+            let e = GaussianPolicy::new(3, 2, &cfg(LogStd::PerDim(bad)), &mut rng, DType::F32)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("per_dim"), "{e}");
+        }
+    }
+
+    #[test]
     fn a_fixed_log_std_can_be_set_and_a_learned_one_cannot() {
         let mut rng = SplitMix64::new(1);
         let cfg = |log_std| GaussianPolicyConfig {
@@ -275,7 +343,7 @@ mod tests {
         };
         let mut fixed =
             GaussianPolicy::new(3, 2, &cfg(LogStd::Fixed(-3.5)), &mut rng, DType::F32).unwrap();
-        fixed.set_fixed_log_std(-4.0).unwrap();
+        fixed.set_fixed_log_std(&LogStd::Fixed(-4.0)).unwrap();
         let set: Vec<f32> = fixed.log_std().to_vec1().unwrap();
         assert_eq!(set, vec![-4.0, -4.0]);
         let h: f32 = fixed.entropy().unwrap().to_scalar().unwrap();
@@ -283,7 +351,7 @@ mod tests {
         assert!((h - want).abs() < 1e-5, "{h} vs {want}");
         let mut learned =
             GaussianPolicy::new(3, 2, &cfg(LogStd::Learned(-1.0)), &mut rng, DType::F32).unwrap();
-        assert!(learned.set_fixed_log_std(-4.0).is_err());
+        assert!(learned.set_fixed_log_std(&LogStd::Fixed(-4.0)).is_err());
         let kept: Vec<f32> = learned.log_std().to_vec1().unwrap();
         assert_eq!(kept, vec![-1.0, -1.0]);
     }

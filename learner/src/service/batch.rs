@@ -28,6 +28,11 @@ pub struct EpisodeSummary {
     pub mean_task_reward: f64,
     /// Mean style reward per step the discriminator judged (see `[amp] discriminate_stand`).
     pub mean_style_reward: f64,
+    /// Standard deviations per step over the batch: the style reward over the judged steps, and
+    /// the task reward over the steps with AMP features (how much of the reward's step-to-step
+    /// variation the discriminator makes). NaN without AMP.
+    pub style_reward_std: f64,
+    pub task_reward_std: f64,
     /// Per task-reward term, its weighted mean per step over the finished episodes.
     pub reward_terms: std::collections::BTreeMap<String, f64>,
 }
@@ -63,7 +68,11 @@ pub struct Assembled {
 
 /// Episode outcomes and the mean task reward per step of `chunks` (style reward left 0).
 pub fn episode_summary(chunks: &[TrajectoryChunk]) -> EpisodeSummary {
-    let mut summary = EpisodeSummary::default();
+    let mut summary = EpisodeSummary {
+        style_reward_std: f64::NAN,
+        task_reward_std: f64::NAN,
+        ..EpisodeSummary::default()
+    };
     let (mut attempted, mut succeeded) = (0u64, 0u64);
     let (mut task_sum, mut steps) = (0f64, 0u64);
     let mut episode_steps = 0u64;
@@ -141,13 +150,39 @@ fn judged(chunk: &TrajectoryChunk, t: usize, skip: Skip) -> bool {
 }
 
 /// The style rewards of a batch's chunks.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct ChunkStyles {
     /// Per chunk, its style reward per step (`None` for chunks without AMP features).
     per_chunk: Vec<Option<Vec<f32>>>,
     /// Sum and count over the steps the discriminator judged.
     judged_sum: f64,
     judged_steps: u64,
+    /// See [`EpisodeSummary::style_reward_std`] and the one after it.
+    style_std: f64,
+    task_std: f64,
+}
+
+impl Default for ChunkStyles {
+    fn default() -> Self {
+        Self {
+            per_chunk: Vec::new(),
+            judged_sum: 0.0,
+            judged_steps: 0,
+            style_std: f64::NAN,
+            task_std: f64::NAN,
+        }
+    }
+}
+
+/// Mean and population standard deviation of `xs` (NaN, NaN when empty).
+fn mean_std(xs: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let (n, sum) = xs.clone().fold((0u64, 0f64), |(n, s), x| (n + 1, s + x));
+    if n == 0 {
+        return (f64::NAN, f64::NAN);
+    }
+    let mean = sum / n as f64;
+    let var = xs.map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64;
+    (mean, var.sqrt())
 }
 
 /// Each chunk's style reward per step, with the steps the discriminator does not judge
@@ -174,6 +209,20 @@ fn chunk_styles(
         }
         styles.push(Some(style));
     }
+    let (_, style_std) = mean_std(chunks.iter().zip(&styles).flat_map(|(c, style)| {
+        style
+            .iter()
+            .flatten()
+            .enumerate()
+            .filter(move |&(t, _)| judged(c, t, skip))
+            .map(|(_, &x)| f64::from(x))
+    }));
+    let (_, task_std) = mean_std(
+        chunks
+            .iter()
+            .filter(|c| c.amp_dim > 0)
+            .flat_map(|c| c.rewards.iter().map(|&x| f64::from(x))),
+    );
     if skip.any() {
         let fill = if count > 0 {
             (sum / count as f64) as f32
@@ -192,6 +241,8 @@ fn chunk_styles(
         per_chunk: styles,
         judged_sum: sum,
         judged_steps: count,
+        style_std,
+        task_std,
     })
 }
 
@@ -247,6 +298,8 @@ pub fn assemble(
     if styles.judged_steps > 0 {
         summary.mean_style_reward = styles.judged_sum / styles.judged_steps as f64;
     }
+    summary.style_reward_std = styles.style_std;
+    summary.task_reward_std = styles.task_std;
     Ok(Assembled {
         batch,
         amp_features,
@@ -383,5 +436,32 @@ mod tests {
         let out = assemble(&chunks, Some(&stand_only), GAE).unwrap();
         assert_eq!(out.amp_features.len(), (3 + 4) * 2);
         assert_eq!(out.amp_features[..6], chunks[0].amp_features[..6]);
+    }
+    #[test]
+    fn the_batch_reports_the_spread_of_its_style_and_task_rewards() {
+        // Task rewards 0, 1, 2, 3 in each chunk: population std √1.25 over the 8 steps.
+        let mut chunks = [chunk(0.0, Some(3)), chunk(10.0, None)];
+        for c in &mut chunks {
+            c.rewards = vec![0.0, 1.0, 2.0, 3.0];
+        }
+        let amp = judging_trainer(false, true);
+        let out = assemble(&chunks, Some(&amp), GAE).unwrap();
+        assert!((out.summary.task_reward_std - 1.25f64.sqrt()).abs() < 1e-9);
+        // The style's std over the 7 judged steps (the first chunk's step 3 is its stand).
+        let judged: Vec<f32> = [0.0f32, 1.0, 2.0, 10.0, 11.0, 12.0, 13.0]
+            .iter()
+            .flat_map(|&x| [x, -x])
+            .collect();
+        let style: Vec<f64> = amp
+            .style_rewards(&judged)
+            .unwrap()
+            .into_iter()
+            .map(f64::from)
+            .collect();
+        let (_, std) = mean_std(style.iter().copied());
+        assert!(std > 0.0);
+        assert!((out.summary.style_reward_std - std).abs() < 1e-6);
+        let plain = assemble(&chunks, None, GAE).unwrap();
+        assert!(plain.summary.style_reward_std.is_nan() && plain.summary.task_reward_std.is_nan());
     }
 }

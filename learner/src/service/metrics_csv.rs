@@ -64,6 +64,10 @@ pub const COLUMNS: &[&str] = &[
     "disc_grad_penalty",
     // The discriminator's learning rate in the update (steered under `[amp.accuracy_target]`).
     "disc_lr",
+    // The style reward's (judged steps) and the task reward's standard deviation per step over
+    // the batch: how much of the reward's step-to-step variation the discriminator makes.
+    "style_reward_std",
+    "task_reward_std",
 ];
 
 pub struct MetricsCsv {

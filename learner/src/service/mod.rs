@@ -118,8 +118,9 @@ pub struct StageSettings {
     pub index: Option<usize>,
     /// Whether the style reward counts and the discriminator learns.
     pub amp_active: bool,
-    /// The policy's fixed log standard deviation (`None`: a learned one, left alone).
-    pub log_std: Option<f32>,
+    /// The policy's fixed log standard deviation, one for every dimension or one each (`None`: a
+    /// learned one, left alone).
+    pub log_std: Option<lhm_nets::LogStd>,
     /// What the actors receive with the weights: the stage's environment and noise.
     pub spec: RunSpec,
 }
@@ -281,9 +282,9 @@ impl TrainConfig {
     /// Errors name the stage and the field (`check` has tried every stage already).
     pub fn stage_at(&self, iteration: u64) -> Result<StageSettings, ServiceError> {
         let index = self.stage_index(iteration);
-        let own_log_std = match self.network.policy.log_std {
-            lhm_nets::LogStd::Fixed(v) => Some(v),
+        let own_log_std = match &self.network.policy.log_std {
             lhm_nets::LogStd::Learned(_) => None,
+            fixed => Some(fixed.clone()),
         };
         let mut spec = self.run_spec();
         let Some(i) = index else {
@@ -298,7 +299,7 @@ impl TrainConfig {
         let at = format!("stages[{i}]");
         let log_std = match (stage.log_std, own_log_std) {
             (None, own) => own,
-            (Some(v), Some(_)) if v.is_finite() => Some(v),
+            (Some(v), Some(_)) if v.is_finite() => Some(lhm_nets::LogStd::Fixed(v)),
             (Some(v), Some(_)) => {
                 return Err(ServiceError::Config(format!(
                     "{at}.log_std must be a finite number, got {v}"
@@ -311,8 +312,8 @@ impl TrainConfig {
                 )))
             }
         };
-        if let Some(v) = log_std {
-            spec.actor_critic.policy.log_std = lhm_nets::LogStd::Fixed(v);
+        if let Some(v) = &log_std {
+            spec.actor_critic.policy.log_std = v.clone();
         }
         if !stage.env.is_empty() {
             let mut env = toml::Table::try_from(&self.env)
@@ -492,11 +493,19 @@ impl TrainConfig {
 /// The run's configuration in its directory (see [`TrainConfig::write_run_config`]).
 pub const RUN_CONFIG_FILE: &str = "config.toml";
 
-/// Lays `top` over `base`: tables merge key by key, any other value replaces.
+/// Lays `top` over `base`: tables merge key by key, any other value replaces. A one-key table
+/// over a one-key table with another key replaces it too: that is an enum switching variant
+/// (`log_std = { learned = -1.0 }` over the default's `{ fixed = -4.5 }`), which merged would
+/// name both.
 fn overlay(base: &mut toml::Table, top: toml::Table) {
+    let variant_switch = |b: &toml::Table, t: &toml::Table| {
+        b.len() == 1 && t.len() == 1 && b.keys().next() != t.keys().next()
+    };
     for (key, value) in top {
         match (base.get_mut(&key), value) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(t)) => overlay(b, t),
+            (Some(toml::Value::Table(b)), toml::Value::Table(t)) if !variant_switch(b, &t) => {
+                overlay(b, t)
+            }
             (_, value) => {
                 base.insert(key, value);
             }
@@ -991,7 +1000,7 @@ fn open_learner(
 fn enter_stage(config: &TrainConfig, learner: &mut Learner) -> Result<StageSettings, ServiceError> {
     let it = learner.counters.iteration;
     let stage = config.stage_at(it)?;
-    if let Some(v) = stage.log_std {
+    if let Some(v) = &stage.log_std {
         learner
             .actor_critic
             .set_fixed_log_std(v)
@@ -1397,6 +1406,10 @@ fn append_metrics_row(
     ]);
     row.extend(terms.iter().map(|(k, v)| (k.as_str(), *v)));
     row.push(("assist_strength", assist_strength.unwrap_or(f64::NAN)));
+    row.extend([
+        ("style_reward_std", s.style_reward_std),
+        ("task_reward_std", s.task_reward_std),
+    ]);
     csv.append(&row)
 }
 
@@ -1429,6 +1442,14 @@ fn metrics_message(
     v.insert("reach_rate".into(), report.reach_rate);
     v.insert("mean_task_reward".into(), s.mean_task_reward);
     v.insert("mean_style_reward".into(), s.mean_style_reward);
+    for (key, value) in [
+        ("amp/style_reward_std", s.style_reward_std),
+        ("amp/task_reward_std", s.task_reward_std),
+    ] {
+        if value.is_finite() {
+            v.insert(key.into(), value);
+        }
+    }
     for m in &update.metrics {
         v.insert(m.key.into(), m.value);
     }
@@ -1647,7 +1668,7 @@ start_distance_max = 0.0
             let s = config.stage_at(it).unwrap();
             assert_eq!(s.index, Some(0));
             assert!(!s.amp_active);
-            assert_eq!(s.log_std, Some(-3.5));
+            assert_eq!(s.log_std, Some(lhm_nets::LogStd::Fixed(-3.5)));
             assert_eq!(
                 s.spec.actor_critic.policy.log_std,
                 lhm_nets::LogStd::Fixed(-3.5)
@@ -1662,7 +1683,7 @@ start_distance_max = 0.0
         let s = config.stage_at(150).unwrap();
         assert_eq!(s.index, Some(1));
         assert!(s.amp_active);
-        assert_eq!(s.log_std, Some(-4.0));
+        assert_eq!(s.log_std, Some(lhm_nets::LogStd::Fixed(-4.0)));
         assert_eq!(gait(&s).rest_start_fraction, 0.5);
         assert_eq!(gait(&s).stop_on, StopOn::FeetDown);
         assert_eq!(gait(&s).start_distance_max, 0.0);
@@ -1736,10 +1757,20 @@ start_distance_max = 0.0
                 Ok(()) => panic!("{refused}: accepted"),
             }
         }
-        // (Set in code: a file's `{ learned = .. }` is laid key by key over the default's
-        // `{ fixed = .. }` and names both variants.)
-        let mut learned = parse("[[stages]]\nuntil_iteration = 10\nlog_std = -3.5\n").unwrap();
-        learned.network.policy.log_std = lhm_nets::LogStd::Learned(-1.0);
+        let learned = parse(
+            "[network.policy]\nlog_std = { learned = -1.0 }\n\n\
+             [[stages]]\nuntil_iteration = 10\nlog_std = -3.5\n",
+        )
+        .unwrap();
+        assert_eq!(
+            learned.network.policy.log_std,
+            lhm_nets::LogStd::Learned(-1.0)
+        );
+        let per_dim = parse("[network.policy]\nlog_std = { per_dim = [-4.5, -2.5] }\n").unwrap();
+        assert_eq!(
+            per_dim.network.policy.log_std,
+            lhm_nets::LogStd::PerDim(vec![-4.5, -2.5])
+        );
         let e = learned.check().unwrap_err().to_string();
         assert!(
             e.contains("stages[0].log_std") && e.contains("learned"),
