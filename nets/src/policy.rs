@@ -290,15 +290,19 @@ impl Discriminator {
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_per_dimension_log_std_samples_each_dimension_at_its_own_spread() {
-        let mut rng = SplitMix64::new(3);
-        let cfg = |log_std| GaussianPolicyConfig {
+    /// A small policy's config with `log_std`.
+    fn cfg(log_std: LogStd) -> GaussianPolicyConfig {
+        GaussianPolicyConfig {
             mlp: MlpConfig::with_hidden(&[8]),
             log_std,
             output_init_scale: 0.01,
             vla: None,
-        };
+        }
+    }
+
+    #[test]
+    fn a_per_dimension_log_std_samples_each_dimension_at_its_own_spread() {
+        let mut rng = SplitMix64::new(3);
         let policy = GaussianPolicy::new(
             3,
             2,
@@ -335,12 +339,6 @@ mod tests {
     #[test]
     fn a_fixed_log_std_can_be_set_and_a_learned_one_cannot() {
         let mut rng = SplitMix64::new(1);
-        let cfg = |log_std| GaussianPolicyConfig {
-            mlp: MlpConfig::with_hidden(&[8]),
-            log_std,
-            output_init_scale: 0.01,
-            vla: None,
-        };
         let mut fixed =
             GaussianPolicy::new(3, 2, &cfg(LogStd::Fixed(-3.5)), &mut rng, DType::F32).unwrap();
         fixed.set_fixed_log_std(&LogStd::Fixed(-4.0)).unwrap();
