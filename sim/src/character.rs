@@ -26,13 +26,12 @@ const LIMIT_DAMPING_PER_KD: f32 = 3.0;
 #[serde(rename_all = "snake_case")]
 pub enum ServoModel {
     /// PD inside the multibody dynamics, as MuJoCo's `implicitfast` integrates a position
-    /// actuator: kp as an implicit joint spring toward the target (its rest point moved so the
-    /// spring force at the current angle is kp·error clamped to the torque limit) and kd as
-    /// implicit joint damping. The servo is solved exactly with the joint's inertia, not as a
+    /// actuator: kp as an implicit joint spring toward the target and kd as implicit joint
+    /// damping, both scaled down together when kp·error − kd·velocity passes the torque limit. The servo is solved exactly with the joint's inertia, not as a
     /// constraint competing with contacts in a few solver iterations: with the feet on the floor
     /// the motor constraints left the servos far softer than kp (15-24° standing errors, a
     /// neutral pose that collapsed in 2 s; BENCHMARKS.md, "Physics fidelity"). The torque clamp
-    /// is applied at the velocity at the start of each pipeline step.
+    /// is applied at the state at the start of each pipeline step.
     #[default]
     ImplicitSpring,
     /// rapier's force-based joint motors: velocity constraints with a force limit, solved
@@ -93,18 +92,22 @@ fn set_passive_dynamics(
 }
 
 /// One implicit servo DoF at coordinate `q` moving at `qd`, `error` from its target: the spring's
-/// rest point and the servo's share of the joint damping. Unsaturated (|kp·error − kd·qd| within
-/// `limit`), the spring pulls toward the target with implicit damping `kd`: MuJoCo's position
-/// actuator under `implicitfast`. Saturated, the torque is the limit and, as for MuJoCo's clamped
-/// force, does not change with velocity: no damping, and the rest point where the spring pulls
-/// with the limit.
-fn implicit_servo(q: f32, error: f32, qd: f32, kp: f32, kd: f32, limit: f32) -> (f32, f32) {
+/// rest point, stiffness and the servo's share of the joint damping. Unsaturated (|kp·error −
+/// kd·qd| within `limit`), the spring pulls toward the target with kp and implicit damping kd:
+/// MuJoCo's position actuator under `implicitfast`. Saturated, both are scaled down by the same
+/// factor so the torque at the current state is the limit (MuJoCo clamps the force), still toward
+/// the target itself. An earlier model kept kp and moved the rest point to where the spring
+/// pulled with the limit: that rest point moved with the joint every step, and on a light DoF
+/// (the upper arm's twist, the ankles) rapier's multibody integrator did not follow it — the
+/// joint stalled far from its target (a 16° twist target held at 1.2°; `servo_replay_probe`).
+fn implicit_servo(q: f32, error: f32, qd: f32, kp: f32, kd: f32, limit: f32) -> (f32, f32, f32) {
     let torque = kp * error - kd * qd;
-    if torque.abs() <= limit {
-        (q + error, kd)
+    let scale = if torque.abs() <= limit {
+        1.0
     } else {
-        (q + limit.copysign(torque) / kp, 0.0)
-    }
+        limit / torque.abs()
+    };
+    (q + error, scale * kp, scale * kd)
 }
 
 fn v3(a: [f64; 3]) -> Vector {
@@ -314,15 +317,15 @@ impl Character {
                 let q = coords[3 + k];
                 match self.servo {
                     ServoModel::ImplicitSpring => {
-                        let (mut rest, mut damping) =
+                        let (mut rest, mut stiffness, mut damping) =
                             implicit_servo(q, errors[k], velocities[k], kp, kd, limit);
-                        let mut stiffness = kp;
                         if let Some(e) = limit_error {
                             // Two springs on one coordinate are one spring of the summed
                             // stiffness with its rest at their stiffness-weighted mean.
                             let k_limit = self.limit_stiffness[*dof];
-                            rest = (kp * rest + k_limit * (q + e[k])) / (kp + k_limit);
-                            stiffness = kp + k_limit;
+                            rest =
+                                (stiffness * rest + k_limit * (q + e[k])) / (stiffness + k_limit);
+                            stiffness += k_limit;
                             damping += self.limit_damping[*dof];
                         }
                         if let Some(link) = mb.link_mut(link_id) {

@@ -129,3 +129,37 @@ fn the_limit_error_of_a_three_dof_joint_points_back_into_its_ranges() {
     let back = Rotation::from_scaled_axis(e) * past_x;
     assert!(ball_limit_error(back, ranges).is_none_or(|e| e.length() < 1e-4));
 }
+
+/// A saturated servo on a light DoF still reaches its target. Each of these asks for more torque
+/// than the joint's limit at the start (shoulders: 100 N·m at kp 400, so past 14.3°; ankles:
+/// 90 N·m, past 12.9°); the upper arm's twist has almost no inertia about its own axis. With the
+/// servo's rest point moved every step to where kp pulled with the limit, rapier's multibody
+/// left these stalled (a 16° twist target held at 1.2°, an ankle at −25° driven to +7°).
+#[test]
+fn saturated_servos_on_light_joints_reach_their_targets() {
+    let model = CharacterModel::amp_humanoid();
+    let config = SimConfig {
+        pin_root: true,
+        spawn_height: SimConfig::default().spawn_height + 0.5,
+        ..SimConfig::default()
+    };
+    for (name, deg) in [
+        ("right_shoulder_z", 16.0f32),
+        ("left_shoulder_z", -40.0),
+        ("right_ankle_y", -25.0),
+        ("left_ankle_x", 25.0),
+    ] {
+        let d = model.dofs.iter().position(|x| x.name == name).unwrap();
+        let mut targets = vec![0.0; model.dofs.len()];
+        targets[d] = deg.to_radians();
+        let mut world = World::new(&model, config.clone());
+        for _ in 0..30 {
+            assert!(world.step_targets(&targets));
+        }
+        let reached = lhm_sim::fidelity::joint_angles(&model, &world.body_states())[d].to_degrees();
+        assert!(
+            (reached - deg).abs() < 1.0,
+            "{name}: target {deg}°, held at {reached}° after 1 s"
+        );
+    }
+}

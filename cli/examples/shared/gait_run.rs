@@ -13,6 +13,7 @@ use std::sync::Arc;
 
 pub struct GaitRun {
     pub config: TrainConfig,
+    #[allow(dead_code)] // not every diagnostic that includes this file plays the policy
     pub learner: Learner,
     pub model: CharacterModel,
     pub bench: Benchmark,
