@@ -27,8 +27,9 @@ const LIMIT_DAMPING_PER_KD: f32 = 3.0;
 pub enum ServoModel {
     /// PD inside the multibody dynamics, as MuJoCo's `implicitfast` integrates a position
     /// actuator: kp as an implicit joint spring toward the target and kd as implicit joint
-    /// damping, both scaled down together when kp·error − kd·velocity passes the torque limit. The servo is solved exactly with the joint's inertia, not as a
-    /// constraint competing with contacts in a few solver iterations: with the feet on the floor
+    /// damping, both scaled down together when kp·error − kd·velocity passes the torque limit.
+    /// The servo is solved exactly with the joint's inertia, not as a constraint competing with
+    /// contacts in a few solver iterations: with the feet on the floor
     /// the motor constraints left the servos far softer than kp (15-24° standing errors, a
     /// neutral pose that collapsed in 2 s; BENCHMARKS.md, "Physics fidelity"). The torque clamp
     /// is applied at the state at the start of each pipeline step.
