@@ -397,10 +397,18 @@ impl Rollout {
             None
         };
         let gait = match (&spec.env.gait, &demo) {
-            (Some(config), Some(demo)) => Some(Arc::new(
-                lhm_sim::gait::reference_for(&model, demo, &config.clip, 1.0 / spec.sim.control_hz)
+            (Some(config), Some(demo)) => {
+                config.check(&model).map_err(RolloutError::Spec)?;
+                Some(Arc::new(
+                    lhm_sim::gait::reference_for(
+                        &model,
+                        demo,
+                        &config.clip,
+                        1.0 / spec.sim.control_hz,
+                    )
                     .map_err(RolloutError::Spec)?,
-            )),
+                ))
+            }
             _ => None,
         };
         let mut rollout = Self {

@@ -262,7 +262,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
     };
     let gait = match (&train.env.gait, &gait_clips) {
         (Some(g), Some(demo)) => Some(lhm_actor::eval::GaitStart {
-            demo,
+            demo: {
+                g.check(&model).map_err(anyhow::Error::msg)?;
+                demo
+            },
             reference: std::sync::Arc::new(
                 lhm_sim::gait::reference_for(&model, demo, &g.clip, 1.0 / train.sim.control_hz)
                     .map_err(anyhow::Error::msg)?,

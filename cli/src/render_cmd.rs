@@ -192,6 +192,7 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
             lhm_sim::motion::AmpWindow::of(&train.env, &train.sim),
         )
         .with_context(|| format!("[env.gait] needs the motion clips in {}", dir.display()))?;
+        gait.check(&model).map_err(anyhow::Error::msg)?;
         let reference =
             lhm_sim::gait::reference_for(&model, &demo, &gait.clip, 1.0 / train.sim.control_hz)
                 .map_err(anyhow::Error::msg)?;

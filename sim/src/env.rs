@@ -137,6 +137,11 @@ pub struct GaitConfig {
     pub clip: String,
     /// PD target = base + `residual` · action scale · action, per DoF (DReCon's residual).
     pub residual: f32,
+    /// Per-joint factors on `residual`: a DoF whose name contains a key acts with `residual` ×
+    /// that factor (the longest key it contains wins), e.g. `{ shoulder = 0.0, elbow = 0.0 }`
+    /// leaves the arms to the clip and the base. Empty (the default): every DoF at `residual`.
+    /// A key no DoF's name contains is an error when the run starts ([`GaitConfig::check`]).
+    pub residual_joints: std::collections::BTreeMap<String, f32>,
     /// Hip yaw (radians) per radian of heading error toward the current object, at most
     /// `steer_max` either way.
     pub steer_gain: f32,
@@ -225,6 +230,7 @@ impl Default for GaitConfig {
         Self {
             clip: "humanoid3d_walk".into(),
             residual: 0.2,
+            residual_joints: Default::default(),
             // Steering destabilises the base: at 0.5 rad/rad it fell within ~1 s turning toward
             // a goal 30-60° off; at 0.1 it survives as long as walking straight (gait_probe).
             steer_gain: 0.1,
@@ -262,6 +268,37 @@ impl GaitConfig {
             stand_seconds: 0.0,
             ..self
         }
+    }
+
+    /// The residual's scale on the DoF called `dof`: `residual`, times the factor of the longest
+    /// `residual_joints` key the name contains.
+    pub fn residual_on(&self, dof: &str) -> f32 {
+        self.residual
+            * self
+                .residual_joints
+                .iter()
+                .filter(|(key, _)| dof.contains(key.as_str()))
+                .max_by_key(|(key, _)| key.len())
+                .map_or(1.0, |(_, factor)| *factor)
+    }
+
+    /// Refuses `residual_joints` keys that name no DoF of `model` and factors that are not finite.
+    pub fn check(&self, model: &CharacterModel) -> Result<(), String> {
+        for (key, factor) in &self.residual_joints {
+            if !factor.is_finite() {
+                return Err(format!(
+                    "[env.gait] residual_joints.{key} = {factor}: not a finite number"
+                ));
+            }
+            if !model.dofs.iter().any(|d| d.name.contains(key.as_str())) {
+                let names: Vec<&str> = model.dofs.iter().map(|d| d.name.as_str()).collect();
+                return Err(format!(
+                    "[env.gait] residual_joints.{key}: no DoF's name contains {key:?} (the DoFs: {})",
+                    names.join(", ")
+                ));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -1189,7 +1226,7 @@ impl TaskEnv {
                 .copied()
                 .filter(|a| a.is_finite())
                 .unwrap_or(0.0);
-            *t = (*t + config.residual * character.action_scale[i] * a)
+            *t = (*t + config.residual_on(&d.name) * character.action_scale[i] * a)
                 .clamp(d.range[0] as f32, d.range[1] as f32);
         }
         // The footfalls keep the clock only while the character walks: standing before the start

@@ -397,6 +397,59 @@ fn in_the_gait_actions_are_residuals_on_the_base_and_the_policy_reads_the_phase(
 }
 
 #[test]
+fn residual_joints_scale_the_residual_per_joint_and_a_key_naming_no_joint_is_refused() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let reference = Arc::new(GaitReference::new(&model, &demo, 0, 1.0 / 30.0).unwrap());
+    let masked = GaitConfig {
+        residual: 0.5,
+        residual_joints: [("knee".to_string(), 0.0), ("left_knee".to_string(), 2.0)]
+            .into_iter()
+            .collect(),
+        ..GaitConfig::default()
+    };
+    // The longest key a name contains wins; names without a key keep `residual`.
+    assert_eq!(masked.residual_on("left_knee"), 1.0);
+    assert_eq!(masked.residual_on("right_knee"), 0.0);
+    assert_eq!(masked.residual_on("right_hip_x"), 0.5);
+    assert!(masked.check(&model).is_ok());
+    // An action on the knee with the factor 0 leaves the world exactly as zero action does (the
+    // whole body: the knees are coupled through the root), while the knee with its own factor
+    // bends.
+    let (right, left) = (dof(&model, "right_knee"), dof(&model, "left_knee"));
+    let run = |knee: Option<usize>| {
+        let mut e = gait_env(&model, Some(masked.clone()));
+        let yaw = e.yaw_toward_first_object();
+        assert!(e.start_in_gait(&demo, Arc::clone(&reference), 9, yaw));
+        let mut action = vec![0.0; model.dofs.len()];
+        if let Some(k) = knee {
+            action[k] = 1.0;
+        }
+        e.step(&action);
+        joint_angles(&model, &e.world.body_states())
+    };
+    let zero = run(None);
+    assert_eq!(
+        run(Some(right)),
+        zero,
+        "the masked knee's action changed the world"
+    );
+    assert!(run(Some(left))[left] > zero[left] + 0.01);
+    // A key that names no DoF, or a factor that is not a number, is refused by name.
+    for (key, factor) in [("tail", 0.0), ("knee", f32::NAN)] {
+        let bad = GaitConfig {
+            residual_joints: [(key.to_string(), factor)].into_iter().collect(),
+            ..GaitConfig::default()
+        };
+        let err = bad.check(&model).unwrap_err();
+        assert!(
+            err.contains("residual_joints") && err.contains(key),
+            "{err}"
+        );
+    }
+}
+
+#[test]
 fn within_the_stop_distance_the_base_stands_and_the_phase_reads_zero() {
     let model = CharacterModel::amp_humanoid();
     let demo = cycle_demo(&model);
