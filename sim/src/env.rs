@@ -345,6 +345,9 @@ pub fn stand_over(stopped_at: Option<u32>, steps: u32, stand_seconds: f32, hz: f
 #[derive(Clone, Debug)]
 struct GaitRun {
     reference: Arc<GaitReference>,
+    /// The residual's scale on each DoF ([`GaitConfig::residual_on`]), worked out once when the
+    /// gait starts rather than by name on every control step.
+    residual: Vec<f32>,
     step: usize,
     /// The episode's step count when the gait came within `stop_distance` of the object (it
     /// stops then or at the footfall `stop_on` waits for).
@@ -792,8 +795,21 @@ impl TaskEnv {
         if self.config.gait.is_none() || self.rig.is_none() || reference.is_empty() {
             return false;
         }
+        let residual = self
+            .config
+            .gait
+            .as_ref()
+            .map(|g| {
+                self.model
+                    .dofs
+                    .iter()
+                    .map(|d| g.residual_on(&d.name))
+                    .collect()
+            })
+            .unwrap_or_default();
         self.gait = Some(GaitRun {
             reference,
+            residual,
             step,
             armed_at: None,
             stopped: false,
@@ -1226,7 +1242,8 @@ impl TaskEnv {
                 .copied()
                 .filter(|a| a.is_finite())
                 .unwrap_or(0.0);
-            *t = (*t + config.residual_on(&d.name) * character.action_scale[i] * a)
+            let scale = run.residual.get(i).copied().unwrap_or(config.residual);
+            *t = (*t + scale * character.action_scale[i] * a)
                 .clamp(d.range[0] as f32, d.range[1] as f32);
         }
         // The footfalls keep the clock only while the character walks: standing before the start
