@@ -493,17 +493,26 @@ impl TrainConfig {
 /// The run's configuration in its directory (see [`TrainConfig::write_run_config`]).
 pub const RUN_CONFIG_FILE: &str = "config.toml";
 
+/// Tables that map free names to values, not enums: `[env.gait] residual_joints` (keys are parts
+/// of DoF names). An overlay adds to or changes their keys.
+const NAME_KEYED_TABLES: &[&str] = &["residual_joints"];
+
 /// Lays `top` over `base`: tables merge key by key, any other value replaces. A one-key table
 /// over a one-key table with another key replaces it too: that is an enum switching variant
 /// (`log_std = { learned = -1.0 }` over the default's `{ fixed = -4.5 }`), which merged would
-/// name both.
+/// name both. Tables whose keys are free names ([`NAME_KEYED_TABLES`]) always merge.
 fn overlay(base: &mut toml::Table, top: toml::Table) {
-    let variant_switch = |b: &toml::Table, t: &toml::Table| {
-        b.len() == 1 && t.len() == 1 && b.keys().next() != t.keys().next()
+    let variant_switch = |key: &str, b: &toml::Table, t: &toml::Table| {
+        !NAME_KEYED_TABLES.contains(&key)
+            && b.len() == 1
+            && t.len() == 1
+            && b.keys().next() != t.keys().next()
     };
     for (key, value) in top {
         match (base.get_mut(&key), value) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(t)) if !variant_switch(b, &t) => {
+            (Some(toml::Value::Table(b)), toml::Value::Table(t))
+                if !variant_switch(&key, b, &t) =>
+            {
                 overlay(b, t)
             }
             (_, value) => {
@@ -1806,6 +1815,32 @@ start_distance_max = 0.0
                 }
             }
         }
+    }
+
+    #[test]
+    fn name_keyed_tables_merge_across_files_while_a_one_key_enum_switches_variant() {
+        let sources = |texts: &[&str]| -> Vec<(String, String)> {
+            texts
+                .iter()
+                .enumerate()
+                .map(|(i, t)| (format!("file{i}.toml"), t.to_string()))
+                .collect()
+        };
+        let config = TrainConfig::from_toml_sources(&sources(&[
+            "[env.gait]\nresidual_joints = { shoulder = 0.0 }\n\n\
+             [network.policy]\nlog_std = { fixed = -4.0 }\n",
+            "[env.gait]\nresidual_joints = { elbow = 0.5 }\n\n\
+             [network.policy]\nlog_std = { learned = -1.0 }\n",
+        ]))
+        .unwrap();
+        let joints = &config.env.gait.as_ref().unwrap().residual_joints;
+        assert_eq!(joints.get("shoulder"), Some(&0.0), "{joints:?}");
+        assert_eq!(joints.get("elbow"), Some(&0.5), "{joints:?}");
+        assert_eq!(joints.len(), 2, "{joints:?}");
+        assert_eq!(
+            config.network.policy.log_std,
+            lhm_nets::LogStd::Learned(-1.0)
+        );
     }
 
     #[test]
