@@ -10,10 +10,16 @@
 //! held-out data as it goes. The policy does not move here: what a variant cannot separate on frozen
 //! data, the training run's discriminator cannot either.
 //! `cargo run --release -p lhm-cli --example disc_fresh_probe -- RUN_DIR TASKS SEEDS noise|mean
-//! UPDATES [scale=JOINT:K] VARIANT...` with VARIANT a comma-separated list of `gp=X`,
+//! UPDATES [scale=JOINT:K] [mask=CLASS+...] [holdout=CLIP] VARIANT...` with VARIANT a comma-separated list of `gp=X`,
 //! `logit_reg=X`, `lr=X`, `wd=X`, `target=X` (the rate steered to that accuracy) (`base`: the
 //! run's own settings); `scale=abdomen:0.5` multiplies the policy's residual on the joints whose
-//! name contains `abdomen` by 0.5 while playing.
+//! name contains `abdomen` by 0.5 while playing; `mask=jointvel+rootvel` zeroes those feature
+//! classes (height, rootrot, rootvel, rootang, jointrot, jointvel, keybody; `older`: every frame
+//! but the newest) in the agent's and the demo's windows alike, so the fresh discriminators judge
+//! without them (the run's own discriminator is shown the whole windows); `target=0` in a
+//! variant takes the accuracy target off; `holdout=NAME` leaves the clips whose name contains
+//! NAME out of the fresh discriminators' demo and reports how many of their windows those
+//! discriminators still take for demo (real motion they were not shown).
 #[path = "shared/gait_run.rs"]
 mod gait_run;
 use gait_run::{scale_residual, GaitRun};
@@ -96,6 +102,7 @@ fn variant(base: &AmpConfig, spec: &str) -> Result<AmpConfig, String> {
             "logit_reg" => c.logit_reg = v,
             "lr" => c.adam.lr = v,
             "wd" => c.weight_decay = v,
+            "target" if v == 0.0 => c.accuracy_target = None,
             "target" => {
                 c.accuracy_target = Some(lhm_learner::AccuracyTarget {
                     accuracy: v,
@@ -106,6 +113,64 @@ fn variant(base: &AmpConfig, spec: &str) -> Result<AmpConfig, String> {
         }
     }
     Ok(c)
+}
+
+/// The feature classes of one AMP frame ([`lhm_sim::obs::amp_frame`]'s layout) and their
+/// column ranges within it.
+fn frame_classes(model: &lhm_sim::CharacterModel) -> Vec<(&'static str, std::ops::Range<usize>)> {
+    let frame = lhm_sim::obs::amp_frame_dim(model);
+    let keys = 3 * lhm_sim::obs::key_bodies(model).len();
+    let dofs = model.dofs.len();
+    let rotations = frame - 13 - dofs - keys;
+    vec![
+        ("height", 0..1),
+        ("rootrot", 1..7),
+        ("rootvel", 7..10),
+        ("rootang", 10..13),
+        ("jointrot", 13..13 + rotations),
+        ("jointvel", 13 + rotations..13 + rotations + dofs),
+        ("keybody", frame - keys..frame),
+    ]
+}
+
+/// The window columns `mask` names: feature classes ([`frame_classes`]) in every frame, and
+/// `older` for every frame but the newest (a one-frame window: no velocity from differences).
+fn masked_columns(
+    model: &lhm_sim::CharacterModel,
+    dim: usize,
+    mask: &[String],
+) -> Result<Vec<usize>, String> {
+    let frame = lhm_sim::obs::amp_frame_dim(model);
+    let frames = dim / frame;
+    let classes = frame_classes(model);
+    let mut out = Vec::new();
+    for name in mask {
+        if name == "older" {
+            out.extend(0..(frames - 1) * frame);
+            continue;
+        }
+        let (_, range) = classes.iter().find(|(c, _)| c == name).ok_or_else(|| {
+            let known: Vec<&str> = classes.iter().map(|(c, _)| *c).collect();
+            format!(
+                "mask={name:?}: the classes are {} and older",
+                known.join(", ")
+            )
+        })?;
+        for f in 0..frames {
+            out.extend(range.clone().map(|c| f * frame + c));
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    Ok(out)
+}
+
+fn zero_columns(rows: &mut [f32], dim: usize, columns: &[usize]) {
+    for row in rows.chunks_mut(dim) {
+        for &c in columns {
+            row[c] = 0.0;
+        }
+    }
 }
 
 fn sample_rows(rows: &[f32], dim: usize, n: usize, rng: &mut SplitMix64) -> Vec<f32> {
@@ -133,15 +198,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         _ => return Err(usage.into()),
     };
     let updates: usize = args[4].parse().map_err(|_| usage)?;
-    let (scaled, specs): (Option<(String, f32)>, &[String]) = match args[5].strip_prefix("scale=") {
-        Some(s) => {
-            let bad = || format!("{:?}: expected scale=JOINT:K", args[5]);
+    let mut scaled: Option<(String, f32)> = None;
+    let mut masked: Vec<String> = Vec::new();
+    let mut holdout: Option<String> = None;
+    let mut first_variant = 5;
+    for arg in &args[5..] {
+        if let Some(s) = arg.strip_prefix("scale=") {
+            let bad = || format!("{arg:?}: expected scale=JOINT:K");
             let (joint, k) = s.split_once(':').ok_or_else(bad)?;
             let k: f32 = k.parse().map_err(|_| bad())?;
-            (Some((joint.to_string(), k)), &args[6..])
+            scaled = Some((joint.to_string(), k));
+        } else if let Some(s) = arg.strip_prefix("mask=") {
+            masked = s.split('+').map(str::to_string).collect();
+        } else if let Some(s) = arg.strip_prefix("holdout=") {
+            holdout = Some(s.to_string());
+        } else {
+            break;
         }
-        None => (None, &args[5..]),
-    };
+        first_variant += 1;
+    }
+    let specs = &args[first_variant..];
     let run = GaitRun::load(&dir, "checkpoint")?;
     let GaitRun {
         config,
@@ -221,6 +297,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let dim = run_amp.feature_dim();
+    let zeroed = masked_columns(model, dim, &masked)?;
+    if !zeroed.is_empty() {
+        println!(
+            "masked {} of {dim} columns ({}) on both sides",
+            zeroed.len(),
+            masked.join("+")
+        );
+    }
     println!(
         "{falls} of {episodes} episodes fell ({} actions); judged windows: {} training, {} held out",
         if noisy { "noisy" } else { "mean" },
@@ -234,9 +318,39 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "the run's discriminator",
         &by_phase(run_amp, &halves[1], &held_phases)?,
     );
+    for half in &mut halves {
+        zero_columns(half, dim, &zeroed);
+    }
+    // With `holdout`, the fresh discriminators' demo is the other clips, and the held-out clip's
+    // windows are judged as a third set: real motion none of them was shown.
+    let (demo, held_clip) = match &holdout {
+        None => (demo.clone(), None),
+        Some(name) => {
+            let rest = demo.retain_clips(|n| !n.contains(name.as_str()));
+            let held = demo.retain_clips(|n| n.contains(name.as_str()));
+            let (Some(rest), Some(held)) = (rest, held) else {
+                let names: Vec<&str> = demo.clips().map(|(n, _)| n).collect();
+                return Err(format!(
+                    "holdout={name:?} must name some but not all of the demo's clips: {}",
+                    names.join(", ")
+                )
+                .into());
+            };
+            let names: Vec<&str> = held.clips().map(|(n, _)| n).collect();
+            println!(
+                "held out of the fresh discriminators' demo: {}",
+                names.join(", ")
+            );
+            let mut rng = SplitMix64::new(13);
+            let mut rows = held.sample_features(2048, &mut || rng.next_f64());
+            zero_columns(&mut rows, dim, &zeroed);
+            (rest, Some(rows))
+        }
+    };
     let mut demo_rng = SplitMix64::new(7);
     let mut draw = || demo_rng.next_f64();
-    let demo_held = demo.sample_features(8192, &mut draw);
+    let mut demo_held = demo.sample_features(8192, &mut draw);
+    zero_columns(&mut demo_held, dim, &zeroed);
     println!(
         "{:<28} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10}",
         "variant", "update", "train", "train demo", "train agnt", "held demo", "held agnt"
@@ -247,15 +361,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut rng = SplitMix64::new(3);
         for u in 1..=updates {
             let agent = sample_rows(&halves[0], dim, AGENT_ROWS, &mut rng);
-            let demo_rows = demo.sample_features(AGENT_ROWS, &mut || rng.next_f64());
+            let mut demo_rows = demo.sample_features(AGENT_ROWS, &mut || rng.next_f64());
+            zero_columns(&mut demo_rows, dim, &zeroed);
             let stats = amp.update(&agent, &demo_rows)?;
             if u % REPORT_EVERY == 0 || u == updates {
                 let (train_demo, train_agent) = amp.accuracy(&halves[0], &demo_rows)?;
                 let (held_demo, held_agent) = amp.accuracy(&halves[1], &demo_held)?;
                 let style = amp.style_rewards(&halves[1])?;
                 let style = style.iter().map(|&r| f64::from(r)).sum::<f64>() / style.len() as f64;
+                let clip = match &held_clip {
+                    Some(rows) => format!(
+                        " held-out clip judged demo {:.3}",
+                        amp.accuracy(&halves[1], rows)?.0
+                    ),
+                    None => String::new(),
+                };
                 println!(
-                    "{name:<28} {u:>7} {:>10.3} {train_demo:>10.3} {train_agent:>10.3} {held_demo:>10.3} {held_agent:>10.3} {:>6.3} {style:>6.3}",
+                    "{name:<28} {u:>7} {:>10.3} {train_demo:>10.3} {train_agent:>10.3} {held_demo:>10.3} {held_agent:>10.3} {:>6.3} {style:>6.3}{clip}",
                     stats.accuracy(),
                     stats.lr
                 );

@@ -969,6 +969,17 @@ impl TaskEnv {
         })
     }
 
+    /// What the imitation term tracks now while the gait walks: the reference's frame for the
+    /// current step moved onto the character's heading and ground position ([`aligned_to`]);
+    /// `None` without a gait or once it has stopped. For probes of how closely the walk follows
+    /// the clip.
+    pub fn gait_imitation_target(&self) -> Option<Vec<BodyState>> {
+        let run = self.gait.as_ref().filter(|run| !run.stopped)?;
+        let states = self.world.body_states();
+        let root = states.first()?;
+        Some(aligned_to(run.reference.at(run.step).0, root))
+    }
+
     /// Whether this episode's gait has stopped (the character stands from then on, or to the end
     /// of a pause with `bout_distance`); false without a gait.
     pub fn gait_stopped(&self) -> bool {

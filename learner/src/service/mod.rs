@@ -318,7 +318,9 @@ impl TrainConfig {
         if !stage.env.is_empty() {
             let mut env = toml::Table::try_from(&self.env)
                 .map_err(|e| ServiceError::Config(format!("the run's [env]: {e}")))?;
-            overlay(&mut env, stage.env.clone());
+            let schema = overlay_schema()?;
+            let env_schema = schema.get("env").and_then(toml::Value::as_table);
+            overlay(&mut env, stage.env.clone(), env_schema);
             let staged: EnvConfig = serde_path_to_error::deserialize(toml::Value::Table(env))
                 .map_err(|e| {
                     ServiceError::Config(format!("{at}.env: field `{}`: {}", e.path(), e.inner()))
@@ -472,11 +474,12 @@ impl TrainConfig {
     pub fn from_toml_sources(sources: &[(String, String)]) -> Result<Self, ServiceError> {
         let mut merged = toml::Table::try_from(Self::default())
             .map_err(|e| ServiceError::Config(format!("the built-in defaults: {e}")))?;
+        let schema = overlay_schema()?;
         for (name, text) in sources {
             let user: toml::Table = text
                 .parse()
                 .map_err(|e| ServiceError::Config(format!("{name}: {e}")))?;
-            overlay(&mut merged, user);
+            overlay(&mut merged, user, Some(&schema));
         }
         let named: Vec<&str> = sources.iter().map(|(name, _)| name.as_str()).collect();
         serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| {
@@ -493,27 +496,44 @@ impl TrainConfig {
 /// The run's configuration in its directory (see [`TrainConfig::write_run_config`]).
 pub const RUN_CONFIG_FILE: &str = "config.toml";
 
-/// Tables that map free names to values, not enums: `[env.gait] residual_joints` (keys are parts
-/// of DoF names). An overlay adds to or changes their keys.
-const NAME_KEYED_TABLES: &[&str] = &["residual_joints"];
+/// The shape an overlay follows: the built-in defaults with every optional sub-configuration
+/// (`[env.gait]`, `[env.skills]`, `[amp.accuracy_target]`) present at its own defaults, so that
+/// a table a file writes has its default beside it even where the run's default leaves it out.
+fn overlay_schema() -> Result<toml::Table, ServiceError> {
+    let mut full = TrainConfig::default();
+    full.env.gait.get_or_insert_with(Default::default);
+    full.env.skills.get_or_insert_with(Default::default);
+    full.amp
+        .accuracy_target
+        .get_or_insert_with(Default::default);
+    toml::Table::try_from(full)
+        .map_err(|e| ServiceError::Config(format!("the built-in defaults: {e}")))
+}
 
-/// Lays `top` over `base`: tables merge key by key, any other value replaces. A one-key table
-/// over a one-key table with another key replaces it too: that is an enum switching variant
-/// (`log_std = { learned = -1.0 }` over the default's `{ fixed = -4.5 }`), which merged would
-/// name both. Tables whose keys are free names ([`NAME_KEYED_TABLES`]) always merge.
-fn overlay(base: &mut toml::Table, top: toml::Table) {
-    let variant_switch = |key: &str, b: &toml::Table, t: &toml::Table| {
-        !NAME_KEYED_TABLES.contains(&key)
-            && b.len() == 1
-            && t.len() == 1
-            && b.keys().next() != t.keys().next()
-    };
+/// Lays `top` over `base`: tables merge key by key, any other value replaces. Where `schema`
+/// (the defaults at the same place, [`overlay_schema`]) says the field is an enum — its default
+/// is a string (a unit variant) or a one-key table (a variant with data) — a one-key table over
+/// a one-key table with another key replaces it: the enum switches variant
+/// (`log_std = { learned = -1.0 }` over `{ fixed = -4.5 }`), which merged would name both.
+/// Everything else merges, however few keys either side has: structs (`[env.gait.stop]
+/// seconds` in one file, `feedback` in the next) and name-keyed maps (`residual_joints`, whose
+/// default is empty). A test keeps every one-key table of the schema an enum.
+fn overlay(base: &mut toml::Table, top: toml::Table, schema: Option<&toml::Table>) {
     for (key, value) in top {
+        let field = schema.and_then(|s| s.get(&key));
+        let enum_field = match field {
+            Some(toml::Value::String(_)) => true,
+            Some(toml::Value::Table(d)) => d.len() == 1,
+            _ => false,
+        };
         match (base.get_mut(&key), value) {
             (Some(toml::Value::Table(b)), toml::Value::Table(t))
-                if !variant_switch(&key, b, &t) =>
+                if !(enum_field
+                    && b.len() == 1
+                    && t.len() == 1
+                    && b.keys().next() != t.keys().next()) =>
             {
-                overlay(b, t)
+                overlay(b, t, field.and_then(toml::Value::as_table))
             }
             (_, value) => {
                 base.insert(key, value);
@@ -1828,19 +1848,78 @@ start_distance_max = 0.0
         };
         let config = TrainConfig::from_toml_sources(&sources(&[
             "[env.gait]\nresidual_joints = { shoulder = 0.0 }\n\n\
+             [env.gait.stop]\nseconds = 0.5\n\n\
+             [amp.accuracy_target]\naccuracy = 0.7\n\n\
              [network.policy]\nlog_std = { fixed = -4.0 }\n",
             "[env.gait]\nresidual_joints = { elbow = 0.5 }\n\n\
+             [env.gait.stop]\nfeedback = 0.25\n\n\
+             [amp.accuracy_target]\nfactor = 1.1\n\n\
              [network.policy]\nlog_std = { learned = -1.0 }\n",
         ]))
         .unwrap();
-        let joints = &config.env.gait.as_ref().unwrap().residual_joints;
+        let gait = config.env.gait.as_ref().unwrap();
+        let joints = &gait.residual_joints;
         assert_eq!(joints.get("shoulder"), Some(&0.0), "{joints:?}");
         assert_eq!(joints.get("elbow"), Some(&0.5), "{joints:?}");
         assert_eq!(joints.len(), 2, "{joints:?}");
+        // One-key struct tables in two files (the run's default has no [env.gait] at all, so
+        // each file's table has the one key it writes) merge as well.
+        assert_eq!(gait.stop.seconds, 0.5, "{:?}", gait.stop);
+        assert_eq!(gait.stop.feedback, 0.25, "{:?}", gait.stop);
+        let target = config.amp.accuracy_target.unwrap();
+        assert_eq!((target.accuracy, target.factor), (0.7, 1.1), "{target:?}");
         assert_eq!(
             config.network.policy.log_std,
             lhm_nets::LogStd::Learned(-1.0)
         );
+    }
+
+    /// The overlay replaces a one-key table where the schema's default is a one-key table; that
+    /// is right only for enums. Every such table must refuse `{}` (an enum needs its variant; a
+    /// struct with defaults or a map would take it): a one-field struct added to the config
+    /// fails here, naming its path, instead of silently losing keys between files.
+    #[test]
+    fn every_one_key_table_in_the_overlay_schema_is_an_enum() {
+        fn one_key_tables(table: &toml::Table, path: &str, out: &mut Vec<String>) {
+            for (key, value) in table {
+                let at = if path.is_empty() {
+                    key.clone()
+                } else {
+                    format!("{path}.{key}")
+                };
+                if let toml::Value::Table(t) = value {
+                    if t.len() == 1 {
+                        out.push(at.clone());
+                    }
+                    one_key_tables(t, &at, out);
+                }
+            }
+        }
+        let schema = overlay_schema().unwrap();
+        let mut paths = Vec::new();
+        one_key_tables(&schema, "", &mut paths);
+        assert!(
+            paths.iter().any(|p| p == "network.policy.log_std"),
+            "the schema should hold log_std's variant table: {paths:?}"
+        );
+        for path in &paths {
+            let mut emptied = schema.clone();
+            let mut at = &mut emptied;
+            let keys: Vec<&str> = path.split('.').collect();
+            for key in &keys[..keys.len() - 1] {
+                at = at.get_mut(*key).unwrap().as_table_mut().unwrap();
+            }
+            at.insert(
+                keys[keys.len() - 1].to_string(),
+                toml::Value::Table(toml::Table::new()),
+            );
+            let read: Result<TrainConfig, _> = toml::Value::Table(emptied).try_into();
+            assert!(
+                read.is_err(),
+                "{path} is a one-key table in the defaults that reads from {{}}: not an enum, \
+                 so overlay() would replace it between files instead of merging"
+            );
+        }
     }
 
     #[test]

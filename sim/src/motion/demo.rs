@@ -284,6 +284,24 @@ impl DemoMotion {
         Ok(self)
     }
 
+    /// These clips with only those whose name `keep` accepts and that [`Self::sample_features`]
+    /// can draw (weight above 0): e.g. one clip held out of a discriminator's demo to see
+    /// whether it still takes that clip for demo. `None` when no such clip is left.
+    pub fn retain_clips(&self, keep: impl Fn(&str) -> bool) -> Option<Self> {
+        let clips: Vec<DemoClip> = self
+            .clips
+            .iter()
+            .filter(|c| c.weight > 0.0 && keep(&c.name))
+            .cloned()
+            .collect();
+        (!clips.is_empty()).then(|| Self {
+            model: self.model.clone(),
+            window: self.window,
+            clips,
+            com: self.com.clone(),
+        })
+    }
+
     /// Width of one sampled row: `window.frames × amp_frame_dim(model)`, as `TaskEnv::amp_dim`.
     pub fn feature_dim(&self) -> usize {
         self.window.frames * amp_frame_dim(&self.model)
@@ -662,6 +680,50 @@ mod tests {
             let joint_vel = &f[vel_start..vel_start + m.dofs.len()];
             assert!(joint_vel.iter().all(|v| v.abs() < 1e-5), "{joint_vel:?}");
         }
+    }
+
+    #[test]
+    fn retained_clips_are_the_only_ones_sampled_and_weighted_out_clips_are_dropped() {
+        let m = CharacterModel::amp_humanoid();
+        let at = |h: f32| still(&m, Vector::new(0.0, 0.0, h), Rotation::IDENTITY);
+        let mut demo = DemoMotion::from_clips(
+            &m,
+            vec![
+                ("walk_a".into(), vec![at(0.9); 7], DT),
+                ("walk_b".into(), vec![at(0.8); 7], DT),
+                ("box".into(), vec![at(0.7); 7], DT),
+            ],
+            window(2),
+        )
+        .expect("valid");
+        demo.clips[2].with_object = true;
+        let demo = demo
+            .with_source_weights(SourceWeights {
+                deepmimic: 1.0,
+                omomo: 0.0,
+            })
+            .expect("walks only");
+        let heights = |d: &DemoMotion| {
+            let mut rng = SplitMix64::new(9);
+            let rows = d.sample_features(200, &mut || rng.unit());
+            // Root heights in centimetres: which clips the rows came from.
+            let mut h: Vec<i32> = rows
+                .chunks(amp_frame_dim(&m))
+                .map(|f| (f[0] * 100.0).round() as i32)
+                .collect();
+            h.sort_unstable();
+            h.dedup();
+            h
+        };
+        let held = demo.retain_clips(|n| n == "walk_b").expect("walk_b");
+        assert_eq!(held.clips().map(|(n, _)| n).collect::<Vec<_>>(), ["walk_b"]);
+        assert_eq!(heights(&held), [80]);
+        let rest = demo.retain_clips(|n| n != "walk_b").expect("walk_a");
+        // The box clip, weighted out of the demo, is not kept either.
+        assert_eq!(rest.clips().map(|(n, _)| n).collect::<Vec<_>>(), ["walk_a"]);
+        assert_eq!(heights(&rest), [90]);
+        assert!(demo.retain_clips(|n| n == "box").is_none());
+        assert!(demo.retain_clips(|_| false).is_none());
     }
 
     #[test]
