@@ -400,10 +400,10 @@ impl Rollout {
             (Some(config), Some(demo)) => {
                 config.check(&model).map_err(RolloutError::Spec)?;
                 Some(Arc::new(
-                    lhm_sim::gait::reference_for(
+                    lhm_sim::gait::reference_for_gait(
                         &model,
                         demo,
-                        &config.clip,
+                        config,
                         1.0 / spec.sim.control_hz,
                     )
                     .map_err(RolloutError::Spec)?,

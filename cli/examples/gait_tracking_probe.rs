@@ -12,12 +12,13 @@
 //! and the root's mean horizontal speed against the clip's.
 #[path = "shared/gait_run.rs"]
 mod gait_run;
+#[path = "shared/pose_error.rs"]
+mod pose_error;
 
 use gait_run::GaitRun;
 use lhm_scenes::Split;
 use lhm_sim::fidelity::joint_angles;
-use lhm_sim::obs::BodyState;
-use lhm_sim::CharacterModel;
+use pose_error::PoseError;
 use std::path::PathBuf;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -137,75 +138,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
-}
-
-/// The imitation term's pose error while walking: per step, the sum over bodies of the squared
-/// angle between the character's and the aligned reference's rotation, taken in the world (as
-/// `rewards::imitation` takes it) and per joint (child relative to parent, DeepMimic's pose
-/// reward), and the pose part `exp(-2 Σ)` each gives.
-#[derive(Default)]
-struct PoseError {
-    steps: usize,
-    world: f64,
-    joint: f64,
-    world_term: f64,
-    joint_term: f64,
-    /// Per body: the summed squared world and joint angles.
-    per_body: Vec<(f64, f64)>,
-}
-
-impl PoseError {
-    fn add(&mut self, model: &CharacterModel, sim: &[BodyState], reference: &[BodyState]) {
-        self.per_body.resize(model.bodies.len(), (0.0, 0.0));
-        let (mut world, mut joint) = (0f64, 0f64);
-        for (i, body) in model.bodies.iter().enumerate() {
-            let w = f64::from(sim[i].rot.angle_between(reference[i].rot)).powi(2);
-            let j = match body.parent {
-                Some(p) => {
-                    let (a, _) = lhm_sim::obs::joint_state(&sim[p], &sim[i]);
-                    let (b, _) = lhm_sim::obs::joint_state(&reference[p], &reference[i]);
-                    f64::from(a.angle_between(b)).powi(2)
-                }
-                None => w,
-            };
-            world += w;
-            joint += j;
-            self.per_body[i].0 += w;
-            self.per_body[i].1 += j;
-        }
-        self.steps += 1;
-        self.world += world;
-        self.joint += joint;
-        self.world_term += (-2.0 * world).exp();
-        self.joint_term += (-2.0 * joint).exp();
-    }
-
-    fn print(&self) {
-        let n = self.steps.max(1) as f64;
-        println!(
-            "imitation pose error over {} walking steps: mean sum of squared angles world {:.3} rad² \
-             (pose part exp(-2·sum) {:.4}), per joint {:.3} rad² ({:.4})",
-            self.steps,
-            self.world / n,
-            self.world_term / n,
-            self.joint / n,
-            self.joint_term / n
-        );
-        let deg = 180.0 / std::f64::consts::PI;
-        let cells: Vec<String> = self
-            .per_body
-            .iter()
-            .enumerate()
-            .map(|(i, (w, j))| {
-                format!(
-                    "{i}: {:.1}°/{:.1}°",
-                    (w / n).sqrt() * deg,
-                    (j / n).sqrt() * deg
-                )
-            })
-            .collect();
-        println!("  rms angle per body, world/joint: {}", cells.join(", "));
-    }
 }
 
 /// Lags (control steps) tried for the achieved angle trailing the target.

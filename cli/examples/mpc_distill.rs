@@ -27,7 +27,7 @@ use lhm_learner::state::Learner;
 use lhm_nets::SplitMix64;
 use lhm_scenes::{Benchmark, Split, Task};
 use lhm_sim::env::TaskEnv;
-use lhm_sim::gait::{reference_for, GaitReference};
+use lhm_sim::gait::{reference_for_gait, GaitReference};
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::plan::{down, Planner, PlannerConfig};
 use lhm_sim::CharacterModel;
@@ -312,7 +312,7 @@ fn load_setup(args: &Args) -> Result<Setup> {
     let demo = DemoMotion::load_dir(&model, &dir, AmpWindow::of(&train.env, &train.sim))
         .with_context(|| format!("motion clips in {}", dir.display()))?;
     let reference = Arc::new(
-        reference_for(&model, &demo, &gait.clip, 1.0 / train.sim.control_hz)
+        reference_for_gait(&model, &demo, &gait, 1.0 / train.sim.control_hz)
             .map_err(anyhow::Error::msg)?,
     );
     Ok(Setup {

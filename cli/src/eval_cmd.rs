@@ -267,7 +267,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
                 demo
             },
             reference: std::sync::Arc::new(
-                lhm_sim::gait::reference_for(&model, demo, &g.clip, 1.0 / train.sim.control_hz)
+                lhm_sim::gait::reference_for_gait(&model, demo, g, 1.0 / train.sim.control_hz)
                     .map_err(anyhow::Error::msg)?,
             ),
             rest: a.from_rest,

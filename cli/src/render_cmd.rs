@@ -194,7 +194,7 @@ pub fn run(a: RenderRolloutArgs) -> Result<()> {
         .with_context(|| format!("[env.gait] needs the motion clips in {}", dir.display()))?;
         gait.check(&model).map_err(anyhow::Error::msg)?;
         let reference =
-            lhm_sim::gait::reference_for(&model, &demo, &gait.clip, 1.0 / train.sim.control_hz)
+            lhm_sim::gait::reference_for_gait(&model, &demo, gait, 1.0 / train.sim.control_hz)
                 .map_err(anyhow::Error::msg)?;
         let yaw = env.yaw_toward_way();
         let step = a.eval_seed.map_or(0, |seed| {

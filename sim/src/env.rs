@@ -142,6 +142,14 @@ pub struct GaitConfig {
     /// leaves the arms to the clip and the base. Empty (the default): every DoF at `residual`.
     /// A key no DoF's name contains is an error when the run starts ([`GaitConfig::check`]).
     pub residual_joints: std::collections::BTreeMap<String, f32>,
+    /// Feed-forward on the base's joint targets (radians), per DoF named exactly: one value for
+    /// the whole cycle or one per control step of it, added to the clip's angles
+    /// ([`crate::gait::GaitReference::with_angle_offsets`]; the walk, its start ramp and its stop
+    /// all take the clip's angles with them). For joints the servo holds off the clip: the
+    /// fifty-fifth session measured the arms 7-9° and the knees 10-14° off it while walking, and a
+    /// discriminator told the walk from the clips on posture alone. `gait_ilc_probe` writes
+    /// these. Empty (the default): the clip's angles.
+    pub angle_offsets: std::collections::BTreeMap<String, Vec<f32>>,
     /// Hip yaw (radians) per radian of heading error toward the current object, at most
     /// `steer_max` either way.
     pub steer_gain: f32,
@@ -231,6 +239,7 @@ impl Default for GaitConfig {
             clip: "humanoid3d_walk".into(),
             residual: 0.2,
             residual_joints: Default::default(),
+            angle_offsets: Default::default(),
             // Steering destabilises the base: at 0.5 rad/rad it fell within ~1 s turning toward
             // a goal 30-60° off; at 0.1 it survives as long as walking straight (gait_probe).
             steer_gain: 0.1,

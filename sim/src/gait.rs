@@ -573,6 +573,49 @@ impl GaitReference {
     pub fn phase(&self, k: usize) -> f32 {
         (k % self.frames.len()) as f32 / self.frames.len() as f32
     }
+
+    /// This cycle with `offsets` (radians) added to the joint angles it asks for: per DoF named
+    /// exactly as in `model`, one value for every step or one per step of the cycle (`len()`).
+    /// The frames (what balance feedback and the imitation term compare with) stay the clip's:
+    /// an offset is a feed-forward on the servo's target, for a joint that the servo holds off
+    /// the clip (gravity sag of arms and knees; `[env.gait] angle_offsets`). An error names the
+    /// DoF of an unknown name, a wrong length or a value that is not finite.
+    pub fn with_angle_offsets(
+        mut self,
+        model: &CharacterModel,
+        offsets: &std::collections::BTreeMap<String, Vec<f32>>,
+    ) -> Result<Self, String> {
+        let n = self.frames.len();
+        for (name, values) in offsets {
+            let d = model
+                .dofs
+                .iter()
+                .position(|d| &d.name == name)
+                .ok_or_else(|| {
+                    let names: Vec<&str> = model.dofs.iter().map(|d| d.name.as_str()).collect();
+                    format!(
+                        "[env.gait] angle_offsets.{name}: no DoF has that name (the DoFs: {})",
+                        names.join(", ")
+                    )
+                })?;
+            if values.len() != 1 && values.len() != n {
+                return Err(format!(
+                    "[env.gait] angle_offsets.{name}: {} values; give 1 (every step) or {n} (one \
+                     per control step of the clip's cycle)",
+                    values.len()
+                ));
+            }
+            if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
+                return Err(format!(
+                    "[env.gait] angle_offsets.{name}: {bad} is not a finite number"
+                ));
+            }
+            for (k, angles) in self.angles.iter_mut().enumerate() {
+                angles[d] += values[if values.len() == 1 { 0 } else { k }];
+            }
+        }
+        Ok(self)
+    }
 }
 
 /// The gait cycle of the first clip in `demo` whose name contains `clip`, at control step `dt`;
@@ -589,6 +632,17 @@ pub fn reference_for(
         .ok_or_else(|| format!("[env.gait] clip {clip:?}: no installed clip has that name"))?;
     GaitReference::new(model, demo, index, dt)
         .ok_or_else(|| format!("[env.gait] clip {clip:?}: shorter than two control steps"))
+}
+
+/// The cycle `gait` walks: its clip's ([`reference_for`]) with its `angle_offsets`
+/// ([`GaitReference::with_angle_offsets`]).
+pub fn reference_for_gait(
+    model: &CharacterModel,
+    demo: &DemoMotion,
+    gait: &crate::env::GaitConfig,
+    dt: f32,
+) -> Result<GaitReference, String> {
+    reference_for(model, demo, &gait.clip, dt)?.with_angle_offsets(model, &gait.angle_offsets)
 }
 
 /// A synthetic stepping cycle, a fixture for tests and probes that need a gait without installed

@@ -8,9 +8,9 @@ use lhm_sim::env::{
 };
 use lhm_sim::fidelity::joint_angles;
 use lhm_sim::gait::{
-    aligned_to, base_targets, braking_targets, reference_for, start_targets, stop_targets,
-    synthetic_cycle_clip, synthetic_cycle_demo, BalanceGains, GaitReference, Rig, StartRamp,
-    CONTACT_HEIGHT,
+    aligned_to, base_targets, braking_targets, reference_for, reference_for_gait, start_targets,
+    stop_targets, synthetic_cycle_clip, synthetic_cycle_demo, BalanceGains, GaitReference, Rig,
+    StartRamp, CONTACT_HEIGHT,
 };
 use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::motion::retarget::{forward_kinematics, KinematicPose};
@@ -444,6 +444,78 @@ fn residual_joints_scale_the_residual_per_joint_and_a_key_naming_no_joint_is_ref
         let err = bad.check(&model).unwrap_err();
         assert!(
             err.contains("residual_joints") && err.contains(key),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn angle_offsets_add_to_the_clips_joint_targets_per_step_and_bad_entries_are_refused() {
+    let model = CharacterModel::amp_humanoid();
+    let demo = cycle_demo(&model);
+    let dt = 1.0 / 30.0;
+    let clip = reference_for(&model, &demo, "cycle", dt).unwrap();
+    let n = clip.len();
+    let (elbow, knee) = (dof(&model, "right_elbow"), dof(&model, "left_knee"));
+    let per_step: Vec<f32> = (0..n).map(|k| 0.01 * k as f32).collect();
+    let gait = GaitConfig {
+        clip: "cycle".into(),
+        angle_offsets: [
+            ("right_elbow".to_string(), vec![-0.3]),
+            ("left_knee".to_string(), per_step.clone()),
+        ]
+        .into_iter()
+        .collect(),
+        ..GaitConfig::default()
+    };
+    let shifted = reference_for_gait(&model, &demo, &gait, dt).unwrap();
+    for (k, knee_offset) in per_step.iter().enumerate() {
+        let (frame, want) = clip.at(k);
+        let (frame_shifted, got) = shifted.at(k);
+        for d in 0..model.dofs.len() {
+            let offset = match d {
+                d if d == elbow => -0.3,
+                d if d == knee => *knee_offset,
+                _ => 0.0,
+            };
+            assert!(
+                (got[d] - (want[d] + offset)).abs() < 1e-6,
+                "step {k}, {}: {} against {} + {offset}",
+                model.dofs[d].name,
+                got[d],
+                want[d]
+            );
+        }
+        // What feedback and imitation compare with stays the clip's.
+        assert_eq!(frame_shifted[0].pos, frame[0].pos);
+        assert_eq!(frame_shifted[3].rot, frame[3].rot);
+    }
+    // In the environment the base walks on the shifted targets: with zero action the elbow ends
+    // bent further one way than on the clip's own.
+    let walk = |reference: GaitReference| {
+        let mut e = gait_env(&model, Some(GaitConfig::default()));
+        let yaw = e.yaw_toward_first_object();
+        assert!(e.start_in_gait(&demo, Arc::new(reference), 9, yaw));
+        for _ in 0..10 {
+            e.step(&vec![0.0; model.dofs.len()]);
+        }
+        joint_angles(&model, &e.world.body_states())[elbow]
+    };
+    let (plain, offset) = (walk(clip.clone()), walk(shifted));
+    assert!(
+        offset < plain - 0.15,
+        "elbow {offset} with a -0.3 offset against {plain} without"
+    );
+    // An unknown DoF, a length that is neither 1 nor the cycle's, a value that is not finite.
+    for (name, values, says) in [
+        ("right_wing", vec![0.1], "no DoF"),
+        ("right_elbow", vec![0.1; n - 1], "values"),
+        ("right_elbow", vec![f32::NAN], "finite"),
+    ] {
+        let bad = [(name.to_string(), values)].into_iter().collect();
+        let err = clip.clone().with_angle_offsets(&model, &bad).unwrap_err();
+        assert!(
+            err.contains("angle_offsets") && err.contains(name) && err.contains(says),
             "{err}"
         );
     }

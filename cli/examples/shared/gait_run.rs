@@ -28,13 +28,7 @@ impl GaitRun {
     pub fn load(dir: &Path, stem: &str) -> Result<Self, Box<dyn std::error::Error>> {
         let config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
         let learner = Learner::load(&dir.join(stem), None)?;
-        let clip = config
-            .env
-            .gait
-            .as_ref()
-            .ok_or("the run has no [env.gait]")?
-            .clip
-            .clone();
+        let gait = config.env.gait.clone().ok_or("the run has no [env.gait]")?;
         let model = CharacterModel::amp_humanoid();
         let bench = Benchmark::embedded()?;
         let demo = DemoMotion::load_dir(
@@ -43,10 +37,10 @@ impl GaitRun {
             AmpWindow::of(&config.env, &config.sim),
         )?
         .with_source_weights(config.amp.demo_weights)?;
-        let reference = Arc::new(lhm_sim::gait::reference_for(
+        let reference = Arc::new(lhm_sim::gait::reference_for_gait(
             &model,
             &demo,
-            &clip,
+            &gait,
             1.0 / config.sim.control_hz,
         )?);
         Ok(Self {
