@@ -238,6 +238,45 @@ pub struct Rollout {
     view: Option<VlaView>,
 }
 
+/// The cycle `spec`'s `[env.gait]` walks: its clip from `demo` with its `angle_offsets`, at the
+/// control step (`None` without a gait). A gait with no reference motion loaded is an error.
+fn gait_cycle_of(
+    model: &CharacterModel,
+    demo: Option<&DemoMotion>,
+    spec: &RunSpec,
+) -> Result<Option<Arc<GaitReference>>, RolloutError> {
+    let Some(config) = &spec.env.gait else {
+        return Ok(None);
+    };
+    let demo = demo.ok_or_else(|| {
+        RolloutError::Spec(
+            "[env.gait] needs reference motion, and this actor loaded none: the run started \
+             without [env.gait] or demo starts (a stage cannot turn the gait on)"
+                .into(),
+        )
+    })?;
+    config.check(model).map_err(RolloutError::Spec)?;
+    let dt = 1.0 / spec.sim.control_hz;
+    lhm_sim::gait::reference_for_gait(model, demo, config, dt)
+        .map(|cycle| Some(Arc::new(cycle)))
+        .map_err(RolloutError::Spec)
+}
+
+/// Whether `new` walks another gait cycle than `old`: a gait on or off, another clip, other
+/// `angle_offsets` or another control rate.
+fn walks_another_cycle(old: &RunSpec, new: &RunSpec) -> bool {
+    let cycle = |spec: &RunSpec| {
+        spec.env.gait.as_ref().map(|g| {
+            (
+                g.clip.clone(),
+                g.angle_offsets.clone(),
+                spec.sim.control_hz.to_bits(),
+            )
+        })
+    };
+    cycle(old) != cycle(new)
+}
+
 /// Where an episode of a `[env.gait]` run starts ([`draw_gait_start`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum GaitStartDraw {
@@ -396,21 +435,7 @@ impl Rollout {
         } else {
             None
         };
-        let gait = match (&spec.env.gait, &demo) {
-            (Some(config), Some(demo)) => {
-                config.check(&model).map_err(RolloutError::Spec)?;
-                Some(Arc::new(
-                    lhm_sim::gait::reference_for_gait(
-                        &model,
-                        demo,
-                        config,
-                        1.0 / spec.sim.control_hz,
-                    )
-                    .map_err(RolloutError::Spec)?,
-                ))
-            }
-            _ => None,
-        };
+        let gait = gait_cycle_of(&model, demo.as_ref(), &spec)?;
         let mut rollout = Self {
             model,
             catalogue: bench.catalogue.clone(),
@@ -571,9 +596,21 @@ impl Rollout {
     }
 
     /// Replaces the run spec (new weights from a learner with other settings take effect at the
-    /// next chunk boundary; environments already running keep going).
-    pub fn set_spec(&mut self, spec: RunSpec) {
+    /// next chunk boundary; environments already running keep going). A spec whose `[env.gait]`
+    /// walks another cycle (a `[[stages]]` entry changing its clip or `angle_offsets`, e.g. a
+    /// curriculum on the offsets) has it built here, so the episodes started after this walk it;
+    /// an error (an unknown DoF, a clip not installed) leaves the old spec in place.
+    pub fn set_spec(&mut self, spec: RunSpec) -> Result<(), RolloutError> {
+        if walks_another_cycle(&self.spec, &spec) {
+            self.gait = gait_cycle_of(&self.model, self.demo.as_ref(), &spec)?;
+        }
         self.spec = spec;
+        Ok(())
+    }
+
+    /// The gait cycle the episodes started from now on walk (`None`: the run has no `[env.gait]`).
+    pub fn gait_cycle(&self) -> Option<&GaitReference> {
+        self.gait.as_deref()
     }
 
     /// One control step of every environment with PPO's sampled actions of `ac` (policy version

@@ -336,7 +336,7 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
                 match decode_policy(&sample.payload().to_bytes()) {
                     Ok(p) if p.version != policy.version => {
                         if p.spec != policy.spec {
-                            rollout.set_spec(p.spec.clone());
+                            rollout.set_spec(p.spec.clone())?;
                         }
                         policy = p;
                         summary.policy_swaps += 1;
@@ -391,7 +391,7 @@ pub fn run_actor(config: &ActorConfig) -> Result<ActorSummary, ActorError> {
             if quota > 0 && sets_at_version >= quota {
                 if let Some(p) = wait_for_newer(&weights_sub, policy.version, SYNC_WAIT) {
                     if p.spec != policy.spec {
-                        rollout.set_spec(p.spec.clone());
+                        rollout.set_spec(p.spec.clone())?;
                     }
                     policy = p;
                     summary.policy_swaps += 1;
