@@ -603,6 +603,18 @@ impl Rollout {
     pub fn set_spec(&mut self, spec: RunSpec) -> Result<(), RolloutError> {
         if walks_another_cycle(&self.spec, &spec) {
             self.gait = gait_cycle_of(&self.model, self.demo.as_ref(), &spec)?;
+            if let Some(gait) = &spec.env.gait {
+                let values = gait.angle_offsets.values().flatten();
+                let (sum, count) = values.fold((0.0f32, 0usize), |(s, n), v| (s + v.abs(), n + 1));
+                tracing::info!(
+                    "actor {}: new episodes walk the cycle of clip {:?} with angle_offsets on {} DoF \
+                     (mean |offset| {:.2}°)",
+                    self.actor_id,
+                    gait.clip,
+                    gait.angle_offsets.len(),
+                    (sum / count.max(1) as f32).to_degrees()
+                );
+            }
         }
         self.spec = spec;
         Ok(())
