@@ -307,6 +307,9 @@ impl GaitConfig {
                 ));
             }
         }
+        for (name, values) in &self.angle_offsets {
+            crate::gait::angle_offset_dof(model, name, values)?;
+        }
         Ok(())
     }
 }

@@ -587,27 +587,12 @@ impl GaitReference {
     ) -> Result<Self, String> {
         let n = self.frames.len();
         for (name, values) in offsets {
-            let d = model
-                .dofs
-                .iter()
-                .position(|d| &d.name == name)
-                .ok_or_else(|| {
-                    let names: Vec<&str> = model.dofs.iter().map(|d| d.name.as_str()).collect();
-                    format!(
-                        "[env.gait] angle_offsets.{name}: no DoF has that name (the DoFs: {})",
-                        names.join(", ")
-                    )
-                })?;
+            let d = angle_offset_dof(model, name, values)?;
             if values.len() != 1 && values.len() != n {
                 return Err(format!(
                     "[env.gait] angle_offsets.{name}: {} values; give 1 (every step) or {n} (one \
                      per control step of the clip's cycle)",
                     values.len()
-                ));
-            }
-            if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
-                return Err(format!(
-                    "[env.gait] angle_offsets.{name}: {bad} is not a finite number"
                 ));
             }
             for (k, angles) in self.angles.iter_mut().enumerate() {
@@ -616,6 +601,33 @@ impl GaitReference {
         }
         Ok(self)
     }
+}
+
+/// The index in `model` of the DoF an `[env.gait] angle_offsets` entry names exactly, once its
+/// values are finite; an error names the entry (and lists the DoFs for an unknown name). The
+/// number of values is checked against the cycle by [`GaitReference::with_angle_offsets`].
+pub fn angle_offset_dof(
+    model: &CharacterModel,
+    name: &str,
+    values: &[f32],
+) -> Result<usize, String> {
+    let d = model
+        .dofs
+        .iter()
+        .position(|d| d.name == name)
+        .ok_or_else(|| {
+            let names: Vec<&str> = model.dofs.iter().map(|d| d.name.as_str()).collect();
+            format!(
+                "[env.gait] angle_offsets.{name}: no DoF has that name (the DoFs: {})",
+                names.join(", ")
+            )
+        })?;
+    if let Some(bad) = values.iter().find(|v| !v.is_finite()) {
+        return Err(format!(
+            "[env.gait] angle_offsets.{name}: {bad} is not a finite number"
+        ));
+    }
+    Ok(d)
 }
 
 /// The gait cycle of the first clip in `demo` whose name contains `clip`, at control step `dt`;

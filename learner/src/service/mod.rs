@@ -841,6 +841,10 @@ fn check_env(at: &str, env: &EnvConfig) -> Result<(), ServiceError> {
         return Ok(());
     };
     let at = format!("{at}.gait");
+    // Names and values of residual_joints and angle_offsets, so a stage's typo stops the run at
+    // its start rather than its actors when the stage comes.
+    g.check(&CharacterModel::amp_humanoid())
+        .map_err(|e| ServiceError::Config(format!("{at}: {e}")))?;
     for (name, f) in [
         ("near_start_fraction", g.near_start_fraction),
         ("rest_start_fraction", g.rest_start_fraction),
@@ -1803,6 +1807,42 @@ start_distance_max = 0.0
         let e = learned.check().unwrap_err().to_string();
         assert!(
             e.contains("stages[0].log_std") && e.contains("learned"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_stage_whose_gait_names_no_dof_or_a_non_finite_offset_is_refused_at_check() {
+        let text = |offsets: &str| {
+            format!(
+                "[env.gait]\nangle_offsets = {{ right_knee = [0.1] }}\n\n\
+                 [[stages]]\nuntil_iteration = 10\n\n\
+                 [stages.env.gait]\nangle_offsets = {{ {offsets} }}\n"
+            )
+        };
+        let load = |t: String| TrainConfig::from_toml_sources(&[("run.toml".to_owned(), t)]);
+        load(text("left_knee = [0.2, 0.3]"))
+            .expect("a stage with good offsets loads")
+            .check()
+            .expect("and checks");
+        for (offsets, names) in [
+            ("left_kne = [0.2]", "angle_offsets.left_kne"),
+            ("left_knee = [nan]", "angle_offsets.left_knee"),
+        ] {
+            let result = load(text(offsets)).and_then(|c| c.check());
+            let e = result.expect_err(offsets).to_string();
+            assert!(e.contains("stages[0].env.gait") && e.contains(names), "{e}");
+        }
+        let mut config = TrainConfig::default();
+        let mut gait = lhm_sim::env::GaitConfig::default();
+        gait.residual_joints.insert("elbw".into(), 0.0);
+        config.env.gait = Some(gait);
+        let e = config
+            .check()
+            .expect_err("no DoF named like elbw")
+            .to_string();
+        assert!(
+            e.contains("env.gait") && e.contains("residual_joints.elbw"),
             "{e}"
         );
     }
