@@ -36,6 +36,7 @@ use lhm_sim::motion::demo::{AmpWindow, DemoMotion};
 use lhm_sim::task::cycles::Handoff;
 use lhm_sim::vla::{VlaLayout, VlaView, Vocabulary};
 use lhm_sim::CharacterModel;
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use lhm_cluster::RunSpec;
@@ -265,16 +266,16 @@ fn gait_cycle_of(
 /// Whether `new` walks another gait cycle than `old`: a gait on or off, another clip, other
 /// `angle_offsets` or another control rate.
 fn walks_another_cycle(old: &RunSpec, new: &RunSpec) -> bool {
-    let cycle = |spec: &RunSpec| {
-        spec.env.gait.as_ref().map(|g| {
-            (
-                g.clip.clone(),
-                g.angle_offsets.clone(),
-                spec.sim.control_hz.to_bits(),
-            )
-        })
-    };
-    cycle(old) != cycle(new)
+    cycle_key(old) != cycle_key(new)
+}
+
+/// `[env.gait] angle_offsets`: radians per DoF name.
+type AngleOffsets = BTreeMap<String, Vec<f32>>;
+
+/// What decides the cycle a spec walks (see [`walks_another_cycle`]), borrowed.
+fn cycle_key(spec: &RunSpec) -> Option<(&str, &AngleOffsets, u32)> {
+    let g = spec.env.gait.as_ref()?;
+    Some((&g.clip, &g.angle_offsets, spec.sim.control_hz.to_bits()))
 }
 
 /// Where an episode of a `[env.gait]` run starts ([`draw_gait_start`]).
