@@ -1,6 +1,7 @@
 """Copy a run's checkpoint into a probe dir whose config.toml has stage K's angle_offsets as its own and no [[stages]].
-python3 probe_dir.py RUN_DIR OUT_DIR K   (K = 1-based stage index)"""
-import re, shutil, sys, pathlib
+python3 probe_dir.py RUN_DIR OUT_DIR K   (K: the K-th [[stages]] entry that sets angle_offsets, from 1)
+Why: the gait probes (cli/examples/shared/gait_run.rs) read the run's top-level [env.gait], not the stage in force."""
+import shutil, sys, pathlib
 run, out, k = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2]), int(sys.argv[3])
 out.mkdir(parents=True, exist_ok=True)
 for f in run.iterdir():
@@ -19,4 +20,4 @@ first_stage = lines.index("[[stages]]")
 new = lines[:top[0]] + lines[s[0]:s[1]] + lines[top[1]:first_stage]
 new[top[0]] = "[env.gait.angle_offsets]"
 (out / "config.toml").write_text("\n".join(new) + "\n")
-print(f"{out}/config.toml: stage {k}'s offsets ({s[1]-s[0]-1} DoF), no stages")
+print(f"{out}/config.toml: stage {k}'s offsets ({sum(1 for l in lines[s[0] + 1:s[1]] if l.strip())} DoF), no stages")
