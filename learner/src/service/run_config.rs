@@ -75,17 +75,38 @@ fn diff_tables(prefix: &str, a: &toml::Table, b: &toml::Table, out: &mut Vec<Str
     }
 }
 
-/// Tables key by key, arrays of one length entry by entry (`stages[1].log_std`), else whole.
+/// How many differences inside an array of plain values (no tables in it) are listed one by
+/// one; more are named once with their count, so a changed table of numbers (a gait's angle
+/// offsets, hundreds of entries) is one line of the message, not hundreds.
+const MAX_LISTED_IN_VALUES: usize = 3;
+
+/// Tables key by key, arrays of one length entry by entry (`stages[1].log_std`; in an array of
+/// plain values, up to [`MAX_LISTED_IN_VALUES`]), else whole.
 fn diff_values(path: &str, a: &toml::Value, b: &toml::Value, out: &mut Vec<String>) {
     match (a, b) {
         _ if a == b => {}
         (toml::Value::Table(x), toml::Value::Table(y)) => diff_tables(path, x, y, out),
         (toml::Value::Array(x), toml::Value::Array(y)) if x.len() == y.len() => {
+            let mut inside = Vec::new();
             for (i, (x, y)) in x.iter().zip(y).enumerate() {
-                diff_values(&format!("{path}[{i}]"), x, y, out);
+                diff_values(&format!("{path}[{i}]"), x, y, &mut inside);
+            }
+            if inside.len() > MAX_LISTED_IN_VALUES && !holds_table(a) && !holds_table(b) {
+                out.push(format!("{path} ({} values differ)", inside.len()));
+            } else {
+                out.extend(inside);
             }
         }
         _ => out.push(format!("{path} ({} → {})", short(a), short(b))),
+    }
+}
+
+/// Whether a table lies anywhere inside `v` (its keys are worth naming one by one).
+fn holds_table(v: &toml::Value) -> bool {
+    match v {
+        toml::Value::Table(_) => true,
+        toml::Value::Array(a) => a.iter().any(holds_table),
+        _ => false,
     }
 }
 
@@ -208,5 +229,33 @@ mod tests {
             changed_keys(&one, &two),
             vec!["stages (1 entry → 2 entries)".to_owned()]
         );
+    }
+
+    #[test]
+    fn a_changed_table_of_numbers_is_named_once_with_its_count() {
+        let saved = table(
+            "[env.gait]\nangle_offsets = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n\
+             [[stages]]\nuntil_iteration = 5\n\
+             [stages.env.gait]\nangle_offsets = [[0.0, 0.0], [0.0, 0.0]]\n",
+        );
+        let now = table(
+            "[env.gait]\nangle_offsets = [[0.1, 0.0, 0.2], [0.3, 0.4, 0.0]]\n\
+             [[stages]]\nuntil_iteration = 6\n\
+             [stages.env.gait]\nangle_offsets = [[0.0, 0.5], [0.0, 0.0]]\n",
+        );
+        // Four numbers differ in the first table: one line; one in the stage's: listed; the
+        // stages (tables) key by key.
+        assert_eq!(
+            changed_keys(&saved, &now),
+            vec![
+                "env.gait.angle_offsets (4 values differ)".to_owned(),
+                "stages[0].env.gait.angle_offsets[0][1] (0.0 → 0.5)".to_owned(),
+                "stages[0].until_iteration (5 → 6)".to_owned(),
+            ]
+        );
+        // Up to three are still listed one by one.
+        let three = table("[env.gait]\nangle_offsets = [[0.1, 0.0, 0.2], [0.3, 0.0, 0.0]]\n");
+        let zero = table("[env.gait]\nangle_offsets = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n");
+        assert_eq!(changed_keys(&zero, &three).len(), 3);
     }
 }
