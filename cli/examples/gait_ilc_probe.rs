@@ -15,7 +15,8 @@
 //! residual, the base alone, unless `policy`: the run's mean action) with the offsets so far, and
 //! prints falls, root speed, the imitation term's pose error and the mean and RMS joint error
 //! over the fitted DoFs (the DoFs whose name contains a `joints` key; default every DoF); every
-//! round but the last then updates the offsets. The run's own `angle_offsets` are the start.
+//! round but the last then updates the offsets. The `angle_offsets` in force at the checkpoint's
+//! iteration (its stage's, in a run with stages) are the start.
 //! `out=FILE` writes the last offsets as a TOML `[env.gait.angle_offsets]` table, to lay over the
 //! run's config with `--config`.
 #[path = "shared/gait_run.rs"]

@@ -24,10 +24,13 @@ pub struct GaitRun {
 
 impl GaitRun {
     /// `dir`'s `config.toml` and checkpoint `stem` (e.g. "checkpoint" or "policy"); an error when
-    /// the run has no `[env.gait]`.
+    /// the run has no `[env.gait]`. `config.env` is the environment in force at the checkpoint's
+    /// iteration: a run with `[[stages]]` (a curriculum on the gait's angle offsets, say) trained
+    /// that checkpoint under its stage's `[env]`, not the run's own.
     pub fn load(dir: &Path, stem: &str) -> Result<Self, Box<dyn std::error::Error>> {
-        let config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
+        let mut config = TrainConfig::from_toml_file(&dir.join("config.toml"))?;
         let learner = Learner::load(&dir.join(stem), None)?;
+        config.env = config.stage_at(learner.counters.iteration)?.spec.env;
         let gait = config.env.gait.clone().ok_or("the run has no [env.gait]")?;
         let model = CharacterModel::amp_humanoid();
         let bench = Benchmark::embedded()?;
