@@ -345,8 +345,42 @@ pub(crate) fn film(
 /// policy fits `train`'s environment for `model`.
 /// The configuration a checkpoint was trained with: `explicit` (`--config`) if given, else the
 /// `config.toml` its learner wrote beside it, else the built-in default (runs from before that
-/// file existed).
+/// file existed). Its `env` is the one in force at the checkpoint's iteration: a run with
+/// `[[stages]]` (the built-in schedule before its last stage, a curriculum on the gait's angle
+/// offsets) trained that checkpoint under its stage's `[env]`, not the run's own.
 pub(crate) fn train_config_for(
+    policy: Option<&std::path::Path>,
+    explicit: Option<&std::path::Path>,
+) -> Result<TrainConfig> {
+    let mut config = run_config_for(policy, explicit)?;
+    if let Some(path) = policy.filter(|_| !config.stages.is_empty()) {
+        let stem = crate::record_cmd::checkpoint_stem(path);
+        // The policy file is a few MB; reading it twice (here and in `load_policy`) keeps every
+        // caller's order (configuration first, then the policy that must fit it) as it is.
+        let iteration = Learner::load(&stem, None)
+            .with_context(|| format!("loading the policy {}", stem.display()))?
+            .counters
+            .iteration;
+        let stage = config.stage_at(iteration)?;
+        match stage.index {
+            Some(i) => tracing::info!(
+                "{} was saved at iteration {iteration}, under stages[{i}]: playing in that \
+                 stage's [env]",
+                stem.display()
+            ),
+            None => tracing::info!(
+                "{} was saved at iteration {iteration}, past the run's stages: playing in the \
+                 run's own [env]",
+                stem.display()
+            ),
+        }
+        config.env = stage.spec.env;
+    }
+    Ok(config)
+}
+
+/// The run's configuration as written, before a stage is chosen (see [`train_config_for`]).
+fn run_config_for(
     policy: Option<&std::path::Path>,
     explicit: Option<&std::path::Path>,
 ) -> Result<TrainConfig> {
@@ -423,4 +457,60 @@ pub(crate) fn load_policy(
         );
     }
     Ok(learner)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A run whose `[env.gait]` changes by stage, as a curriculum on the gait does.
+    const STAGED: &str = r#"
+[env.gait]
+rest_start_fraction = 0.5
+
+[[stages]]
+until_iteration = 100
+[stages.env.gait]
+rest_start_fraction = 1.0
+
+[[stages]]
+until_iteration = 200
+[stages.env.gait]
+rest_start_fraction = 0.25
+"#;
+
+    fn rest_start_fraction(config: &TrainConfig) -> f32 {
+        config
+            .env
+            .gait
+            .as_ref()
+            .expect("[env.gait]")
+            .rest_start_fraction
+    }
+
+    #[test]
+    fn a_checkpoint_is_played_under_the_stage_in_force_at_its_iteration() {
+        let dir = std::env::temp_dir().join(format!("lhm-render-stage-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let written = dir.join("written.toml");
+        std::fs::write(&written, STAGED).unwrap();
+        let config = TrainConfig::from_toml_file(&written).unwrap();
+        config.write_run_config(&dir).unwrap();
+        let mut learner = Learner::new(config.learner_config()).unwrap();
+        let policy = dir.join("policy");
+        for (iteration, want) in [(0, 1.0), (99, 1.0), (100, 0.25), (250, 0.5)] {
+            learner.counters.iteration = iteration;
+            learner.save_policy(&policy).unwrap();
+            // Beside the checkpoint, and given with --config: the same stage.
+            for explicit in [None, Some(written.as_path())] {
+                let got = train_config_for(Some(&policy), explicit).unwrap();
+                assert_eq!(rest_start_fraction(&got), want, "iteration {iteration}");
+                assert_eq!(got.stages, config.stages);
+            }
+        }
+        // Without a policy there is no iteration: the run's own [env].
+        let own = train_config_for(None, Some(&written)).unwrap();
+        assert_eq!(rest_start_fraction(&own), 0.5);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -1,8 +1,9 @@
 """Copy a run's checkpoint into a probe dir whose config.toml has stage K's angle_offsets as its own and no [[stages]].
 python3 probe_dir.py RUN_DIR OUT_DIR K   (K: the K-th [[stages]] entry that sets angle_offsets, from 1)
 Why: the gait probes (cli/examples/shared/gait_run.rs) read the run's top-level [env.gait], not the stage in force;
-since the fifty-ninth session they read the stage in force at the checkpoint's iteration, and this is kept to
-reproduce the fifty-eighth session's probes as they were run."""
+since the fifty-ninth session they read the stage in force at the checkpoint's iteration (and lhm render-rollout,
+eval, record and the vla probe since the sixtieth), and this is kept to reproduce the fifty-eighth and
+fifty-ninth sessions' probes and GIF as they were run."""
 import shutil, sys, pathlib
 run, out, k = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2]), int(sys.argv[3])
 out.mkdir(parents=True, exist_ok=True)
