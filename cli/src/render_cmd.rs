@@ -341,8 +341,6 @@ pub(crate) fn film(
     Ok(Filmed { frames, end })
 }
 
-/// A learner checkpoint (`runs/<run>/checkpoint` or `policy`, with or without its extension) whose
-/// policy fits `train`'s environment for `model`.
 /// The configuration a checkpoint was trained with: `explicit` (`--config`) if given, else the
 /// `config.toml` its learner wrote beside it, else the built-in default (runs from before that
 /// file existed). Its `env` is the one in force at the checkpoint's iteration: a run with
@@ -420,6 +418,8 @@ pub(crate) fn without_training_aids(mut train: TrainConfig) -> TrainConfig {
     train
 }
 
+/// A learner checkpoint (`runs/<run>/checkpoint` or `policy`, with or without its extension) whose
+/// policy fits `train`'s environment for `model`.
 pub(crate) fn load_policy(
     path: &std::path::Path,
     train: &TrainConfig,
