@@ -37,6 +37,8 @@
 //! `RAMP=seconds,feedback,…` fixes it otherwise. With `ROOMS=1`, `STOP_DISTANCE=m` stops the
 //! gait that close to the object (`[env.gait] stop_distance`), `NEAR=m` starts that far before it
 //! (`start_distance`), and `SEARCH=stop` searches the stop's ramp (`[env.gait.stop]`).
+//! `OFFSETS=FILE` (JSON, DoF name → per-step radians; `OFFSETS_LEGS=k` scales the hips', knees'
+//! and ankles') lays `[env.gait] angle_offsets` on the reference the search walks.
 //! `gait_probe push`: the neutral standing pose (zero action) with every body moving at
 //! 0.1-1.0 m/s forward or sideways — how much momentum standing alone absorbs.
 
@@ -509,6 +511,25 @@ fn walk_gains(text: &str) -> Result<BalanceGains, String> {
     Ok(BalanceGains::from_array(array))
 }
 
+/// `OFFSETS=FILE`: the base's `[env.gait] angle_offsets` as JSON (`{"left_knee": [..], ..}`, e.g.
+/// converted from a run's TOML overlay), the hips', knees' and ankles' times `OFFSETS_LEGS`
+/// (default 1): a search of the walking gains for the clip's posture (the fifty-sixth to sixtieth
+/// sessions' feed-forward), which the default gains were not searched under.
+fn offsets_from(
+    path: &str,
+    legs: f32,
+) -> Result<std::collections::BTreeMap<String, Vec<f32>>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("OFFSETS: {path}: {e}"))?;
+    let mut offsets: std::collections::BTreeMap<String, Vec<f32>> =
+        serde_json::from_str(&text).map_err(|e| format!("OFFSETS: {path}: {e}"))?;
+    for (name, values) in offsets.iter_mut() {
+        if ["hip", "knee", "ankle"].iter().any(|j| name.contains(j)) {
+            values.iter_mut().for_each(|v| *v *= legs);
+        }
+    }
+    Ok(offsets)
+}
+
 /// A tiny deterministic generator (xorshift) with Box-Muller normals.
 struct Rng(u64);
 impl Rng {
@@ -553,6 +574,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .unwrap_or(1.0);
     let reference =
         GaitReference::new(&model, &demo, clip, tempo / sim.control_hz).ok_or("clip too short")?;
+    let reference = match std::env::var("OFFSETS") {
+        Ok(path) => {
+            let legs = std::env::var("OFFSETS_LEGS")
+                .ok()
+                .map(|v| v.parse::<f32>())
+                .transpose()?
+                .unwrap_or(1.0);
+            reference.with_angle_offsets(&model, &offsets_from(&path, legs)?)?
+        }
+        Err(_) => reference,
+    };
     let env_f32 = |k: &str, d: f32| {
         std::env::var(k)
             .ok()
