@@ -239,6 +239,23 @@ pub struct Rollout {
     view: Option<VlaView>,
 }
 
+/// Logs the cycle `spec`'s `[env.gait]` walks (nothing without a gait): its clip and the mean
+/// size of its `angle_offsets`.
+fn log_cycle(actor_id: &str, what: &str, spec: &RunSpec) {
+    let Some(gait) = &spec.env.gait else {
+        return;
+    };
+    let values = gait.angle_offsets.values().flatten();
+    let (sum, count) = values.fold((0.0f32, 0usize), |(s, n), v| (s + v.abs(), n + 1));
+    tracing::info!(
+        "actor {actor_id}: {what} the cycle of clip {:?} with angle_offsets on {} DoF \
+         (mean |offset| {:.2}°)",
+        gait.clip,
+        gait.angle_offsets.len(),
+        (sum / count.max(1) as f32).to_degrees()
+    );
+}
+
 /// The cycle `spec`'s `[env.gait]` walks: its clip from `demo` with its `angle_offsets`, at the
 /// control step (`None` without a gait). A gait with no reference motion loaded is an error.
 fn gait_cycle_of(
@@ -437,6 +454,9 @@ impl Rollout {
             None
         };
         let gait = gait_cycle_of(&model, demo.as_ref(), &spec)?;
+        // Also at the start, not only on a stage's change: a run resumed inside a curriculum's
+        // stage says in its log (`lhm train`: the run's actor-N.log) which cycle it walks.
+        log_cycle(actor_id, "episodes walk", &spec);
         let mut rollout = Self {
             model,
             catalogue: bench.catalogue.clone(),
@@ -604,18 +624,7 @@ impl Rollout {
     pub fn set_spec(&mut self, spec: RunSpec) -> Result<(), RolloutError> {
         if walks_another_cycle(&self.spec, &spec) {
             self.gait = gait_cycle_of(&self.model, self.demo.as_ref(), &spec)?;
-            if let Some(gait) = &spec.env.gait {
-                let values = gait.angle_offsets.values().flatten();
-                let (sum, count) = values.fold((0.0f32, 0usize), |(s, n), v| (s + v.abs(), n + 1));
-                tracing::info!(
-                    "actor {}: new episodes walk the cycle of clip {:?} with angle_offsets on {} DoF \
-                     (mean |offset| {:.2}°)",
-                    self.actor_id,
-                    gait.clip,
-                    gait.angle_offsets.len(),
-                    (sum / count.max(1) as f32).to_degrees()
-                );
-            }
+            log_cycle(&self.actor_id, "new episodes walk", &spec);
         }
         self.spec = spec;
         Ok(())
