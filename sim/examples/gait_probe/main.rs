@@ -578,7 +578,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok(path) => {
             let legs = std::env::var("OFFSETS_LEGS")
                 .ok()
-                .map(|v| v.parse::<f32>())
+                .map(|v| {
+                    v.parse::<f32>()
+                        .map_err(|_| format!("OFFSETS_LEGS: {v:?} is not a number"))
+                })
                 .transpose()?
                 .unwrap_or(1.0);
             reference.with_angle_offsets(&model, &offsets_from(&path, legs)?)?
