@@ -35,6 +35,7 @@ pub fn load(dir: Option<PathBuf>, config: &TrainConfig) -> Result<Box<dyn DemoSo
             )
         })?
         .with_source_weights(config.amp.demo_weights)?;
+    check_gait_cycles(&model, &motion, config)?;
     let clips: Vec<String> = motion
         .clips()
         .map(|(name, d)| format!("{name} {d:.1}s"))
@@ -48,4 +49,82 @@ pub fn load(dir: Option<PathBuf>, config: &TrainConfig) -> Result<Box<dyn DemoSo
         motion,
         rng: SplitMix64::new(0x00A3_0DE3),
     }))
+}
+
+/// Builds the gait cycle of the run's `[env.gait]` and of every stage's from `motion`: a clip no
+/// installed clip is named after, or an `angle_offsets` table whose length is not the clip's
+/// cycle, stops the run at its start with the stage's name, rather than its actors when the stage
+/// comes hours later (the learner's own check knows the names but not the clip's length).
+pub(crate) fn check_gait_cycles(
+    model: &CharacterModel,
+    motion: &DemoMotion,
+    config: &TrainConfig,
+) -> Result<()> {
+    let dt = 1.0 / config.sim.control_hz;
+    let stages = config.stages.iter().enumerate().map(|(i, stage)| {
+        config
+            .stage_at(stage.until_iteration - 1)
+            .map(|settings| (format!("stages[{i}].env"), settings.spec.env))
+    });
+    for entry in std::iter::once(Ok(("env".to_string(), config.env.clone()))).chain(stages) {
+        let (at, env) = entry?;
+        if let Some(gait) = &env.gait {
+            lhm_sim::gait::reference_for_gait(model, motion, gait, dt)
+                .map_err(|e| anyhow::anyhow!("{at}: {e}"))?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lhm_learner::service::RunStage;
+    use lhm_sim::env::GaitConfig;
+
+    /// A gait run on the synthetic `cycle_walk` whose one stage adds `offsets` (name, length).
+    fn gait_run(offsets: &[(&str, usize)]) -> TrainConfig {
+        let mut config = TrainConfig::default();
+        config.env.gait = Some(GaitConfig {
+            clip: "cycle_walk".into(),
+            ..GaitConfig::default()
+        });
+        let table = offsets
+            .iter()
+            .map(|(name, len)| format!("{name} = {:?}", vec![0.01f32; *len]))
+            .collect::<Vec<_>>()
+            .join("\n");
+        config.stages = vec![RunStage {
+            until_iteration: 10,
+            amp_enabled: None,
+            log_std: None,
+            env: toml::from_str(&format!("[gait.angle_offsets]\n{table}\n"))
+                .expect("a stage's [env] parses"),
+        }];
+        config
+    }
+
+    #[test]
+    fn a_stages_offsets_of_the_wrong_length_are_refused_at_the_start_by_name() {
+        let model = CharacterModel::amp_humanoid();
+        let motion = lhm_sim::gait::synthetic_cycle_demo(&model, AmpWindow::default())
+            .expect("the synthetic clip loads");
+        let dt = 1.0 / TrainConfig::default().sim.control_hz;
+        let steps = lhm_sim::gait::reference_for(&model, &motion, "cycle_walk", dt)
+            .expect("the synthetic cycle")
+            .len();
+        for ok in [1, steps] {
+            check_gait_cycles(&model, &motion, &gait_run(&[("left_knee", ok)]))
+                .unwrap_or_else(|e| panic!("{ok} values: {e:#}"));
+        }
+        let err = check_gait_cycles(&model, &motion, &gait_run(&[("left_knee", steps - 1)]))
+            .expect_err("a table one short");
+        let text = format!("{err:#}");
+        assert!(text.contains("stages[0].env"), "{text}");
+        assert!(text.contains("left_knee"), "{text}");
+        let mut unknown = gait_run(&[]);
+        unknown.env.gait.as_mut().unwrap().clip = "no_such_clip".into();
+        let err = check_gait_cycles(&model, &motion, &unknown).expect_err("an unknown clip");
+        assert!(format!("{err:#}").starts_with("env: "), "{err:#}");
+    }
 }
