@@ -63,7 +63,7 @@ pub(crate) fn check_gait_cycles(
     let dt = 1.0 / config.sim.control_hz;
     let stages = config.stages.iter().enumerate().map(|(i, stage)| {
         config
-            .stage_at(stage.until_iteration - 1)
+            .stage_at(stage.until_iteration.saturating_sub(1))
             .map(|settings| (format!("stages[{i}].env"), settings.spec.env))
     });
     for entry in std::iter::once(Ok(("env".to_string(), config.env.clone()))).chain(stages) {
