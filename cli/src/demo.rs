@@ -61,13 +61,7 @@ pub(crate) fn check_gait_cycles(
     config: &TrainConfig,
 ) -> Result<()> {
     let dt = 1.0 / config.sim.control_hz;
-    let stages = config.stages.iter().enumerate().map(|(i, stage)| {
-        config
-            .stage_at(stage.until_iteration.saturating_sub(1))
-            .map(|settings| (format!("stages[{i}].env"), settings.spec.env))
-    });
-    for entry in std::iter::once(Ok(("env".to_string(), config.env.clone()))).chain(stages) {
-        let (at, env) = entry?;
+    for (at, env) in config.named_envs()? {
         if let Some(gait) = &env.gait {
             lhm_sim::gait::reference_for_gait(model, motion, gait, dt)
                 .map_err(|e| anyhow::anyhow!("{at}: {e}"))?;

@@ -358,6 +358,19 @@ impl TrainConfig {
         })
     }
 
+    /// Every environment the run will play, each named as an error about it names it: the run's
+    /// own (`env`), then each stage's as it stands at the stage's last iteration (`stages[i].env`:
+    /// the stage's table laid over the run's). What a check of the run's environments walks,
+    /// here and where `lhm train` builds each one's gait cycle before it starts.
+    pub fn named_envs(&self) -> Result<Vec<(String, EnvConfig)>, ServiceError> {
+        let mut envs = vec![("env".to_string(), self.env.clone())];
+        for (i, stage) in self.stages.iter().enumerate() {
+            let settings = self.stage_at(stage.until_iteration.saturating_sub(1))?;
+            envs.push((format!("stages[{i}].env"), settings.spec.env));
+        }
+        Ok(envs)
+    }
+
     /// Counts that must be positive (a 0 was silently treated as 1 before).
     pub fn check(&self) -> Result<(), ServiceError> {
         for (name, value) in [
@@ -376,7 +389,6 @@ impl TrainConfig {
             .demo_weights
             .check()
             .map_err(|e| ServiceError::Config(format!("amp.demo_weights: {e}")))?;
-        check_env("env", &self.env)?;
         let mut until = 0;
         for (i, stage) in self.stages.iter().enumerate() {
             if stage.until_iteration <= until {
@@ -386,8 +398,9 @@ impl TrainConfig {
                 )));
             }
             until = stage.until_iteration;
-            let settings = self.stage_at(stage.until_iteration - 1)?;
-            check_env(&format!("stages[{i}].env"), &settings.spec.env)?;
+        }
+        for (at, env) in self.named_envs()? {
+            check_env(&at, &env)?;
         }
         if self.role == "vla" {
             let vla = self.network.policy.vla.as_ref().ok_or_else(|| {
@@ -1843,6 +1856,45 @@ start_distance_max = 0.0
             .to_string();
         assert!(
             e.contains("env.gait") && e.contains("residual_joints.elbw"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn named_envs_are_the_runs_then_each_stage_at_its_end_and_stages_out_of_order_are_refused() {
+        let text = |second: u64| {
+            format!(
+                "[env]\nmax_episode_steps = 100\n\n\
+                 [[stages]]\nuntil_iteration = 10\n\n\
+                 [stages.env]\nmax_episode_steps = 200\n\n\
+                 [[stages]]\nuntil_iteration = {second}\n\n\
+                 [stages.env]\nwalk_speed = 0.5\n"
+            )
+        };
+        let load = |t: String| TrainConfig::from_toml_sources(&[("run.toml".to_owned(), t)]);
+        let config = load(text(20)).expect("two ordered stages load");
+        let envs = config.named_envs().expect("every stage's settings resolve");
+        let named: Vec<(&str, u32, f32)> = envs
+            .iter()
+            .map(|(at, env)| (at.as_str(), env.max_episode_steps, env.walk_speed))
+            .collect();
+        let speed = config.env.walk_speed;
+        // Each stage lays over the run's own [env], not over the stage before.
+        assert_eq!(
+            named,
+            [
+                ("env", 100, speed),
+                ("stages[0].env", 200, speed),
+                ("stages[1].env", 100, 0.5)
+            ]
+        );
+        config.check().expect("and checks");
+        let e = load(text(10))
+            .and_then(|c| c.check())
+            .expect_err("a stage ending where the one before ends")
+            .to_string();
+        assert!(
+            e.contains("stages[1].until_iteration must be above the stage before's (10)"),
             "{e}"
         );
     }
