@@ -164,12 +164,14 @@ impl LearnerOpts {
     }
 }
 
-/// The discriminator's demo features for `config` (none without AMP).
+/// The discriminator's demo features for `config` (none without AMP; a gait run's cycles are
+/// still built from the clips, to refuse a bad one at the start).
 pub(crate) fn demo_for(
     motion_dir: Option<PathBuf>,
     config: &TrainConfig,
 ) -> Result<Option<Box<dyn DemoSource>>> {
     if !config.amp_present() {
+        crate::demo::check_gait_run(motion_dir, config)?;
         return Ok(None);
     }
     crate::demo::load(motion_dir, config).map(Some)

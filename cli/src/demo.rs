@@ -51,6 +51,33 @@ pub fn load(dir: Option<PathBuf>, config: &TrainConfig) -> Result<Box<dyn DemoSo
     }))
 }
 
+/// For a run without AMP (whose learner needs no clips for a discriminator): loads the clips all
+/// the same when the run or a stage walks on `[env.gait]`, and builds every cycle, so a bad
+/// offset table or clip name stops it at its start as it does an AMP run, not its actors later.
+/// Where this process has no clips (a learner whose actors run elsewhere) it says so and leaves
+/// the check to the actors, which need the clips anyway.
+pub fn check_gait_run(dir: Option<PathBuf>, config: &TrainConfig) -> Result<()> {
+    if config
+        .named_envs()?
+        .iter()
+        .all(|(_, env)| env.gait.is_none())
+    {
+        return Ok(());
+    }
+    let dir = dir.unwrap_or_else(lhm_sim::motion::default_dir);
+    let model = CharacterModel::amp_humanoid();
+    match DemoMotion::load_dir(&model, &dir, AmpWindow::of(&config.env, &config.sim)) {
+        Ok(motion) => check_gait_cycles(&model, &motion, config),
+        Err(e) => {
+            tracing::warn!(
+                "[env.gait] cycles not checked here: no clips in {} ({e}); the actors build them",
+                dir.display()
+            );
+            Ok(())
+        }
+    }
+}
+
 /// Builds the gait cycle of the run's `[env.gait]` and of every stage's from `motion`: a clip no
 /// installed clip is named after, or an `angle_offsets` table whose length is not the clip's
 /// cycle, stops the run at its start with the stage's name, rather than its actors when the stage
@@ -120,5 +147,18 @@ mod tests {
         unknown.env.gait.as_mut().unwrap().clip = "no_such_clip".into();
         let err = check_gait_cycles(&model, &motion, &unknown).expect_err("an unknown clip");
         assert!(format!("{err:#}").starts_with("env: "), "{err:#}");
+    }
+
+    #[test]
+    fn a_run_without_amp_and_without_clips_here_leaves_its_cycles_to_the_actors() {
+        let empty = std::env::temp_dir().join(format!("lhm-no-clips-{}", std::process::id()));
+        std::fs::create_dir_all(&empty).expect("an empty clip dir");
+        // A table no cycle has the length of: refused where the clips are (test above), let
+        // through here, where none are to build it from.
+        let run = gait_run(&[("left_knee", 2)]);
+        check_gait_run(Some(empty.clone()), &run).expect("no clips: the actors check");
+        check_gait_run(Some(empty.join("missing")), &TrainConfig::default())
+            .expect("no [env.gait]: nothing to check, no clips read");
+        let _ = std::fs::remove_dir_all(&empty);
     }
 }
