@@ -10,8 +10,9 @@
 //! held-out data as it goes. The policy does not move here: what a variant cannot separate on frozen
 //! data, the training run's discriminator cannot either.
 //! `cargo run --release -p lhm-cli --example disc_fresh_probe -- RUN_DIR TASKS SEEDS noise|mean
-//! UPDATES [scale=JOINT:K] [mask=CLASS+...] [holdout=CLIP] VARIANT...` with VARIANT a comma-separated list of `gp=X`,
-//! `logit_reg=X`, `lr=X`, `wd=X`, `target=X` (the rate steered to that accuracy) (`base`: the
+//! UPDATES [scale=JOINT:K] [mask=CLASS+...] [holdout=CLIP] [mirror] VARIANT...` with VARIANT a comma-separated list of `gp=X`,
+//! `logit_reg=X`, `lr=X`, `wd=X`, `hidden=256x128` (the discriminator's hidden widths), `target=X`
+//! (the rate steered to that accuracy) (`base`: the
 //! run's own settings); `scale=abdomen:0.5` multiplies the policy's residual on the joints whose
 //! name contains `abdomen` by 0.5 while playing; `mask=jointvel+rootvel` zeroes those feature
 //! classes (height, rootrot, rootvel, rootang, jointrot, jointvel, keybody; `older`: every frame
@@ -19,7 +20,8 @@
 //! without them (the run's own discriminator is shown the whole windows); `target=0` in a
 //! variant takes the accuracy target off; `holdout=NAME` leaves the clips whose name contains
 //! NAME out of the fresh discriminators' demo and reports how many of their windows those
-//! discriminators still take for demo (real motion they were not shown).
+//! discriminators still take for demo (real motion they were not shown); `mirror` adds each demo
+//! clip's left-right mirror image to the fresh discriminators' demo (`DemoMotion::with_mirrors`).
 #[path = "shared/gait_run.rs"]
 mod gait_run;
 use gait_run::{scale_residual, GaitRun};
@@ -92,10 +94,18 @@ fn variant(base: &AmpConfig, spec: &str) -> Result<AmpConfig, String> {
     for kv in spec.split(',') {
         let bad = || {
             format!(
-                "{kv:?}: a variant's entries are gp=X, logit_reg=X, lr=X, wd=X or target=ACCURACY"
+                "{kv:?}: a variant's entries are gp=X, logit_reg=X, lr=X, wd=X, hidden=WxW... or target=ACCURACY"
             )
         };
         let (k, v) = kv.split_once('=').ok_or_else(bad)?;
+        if k == "hidden" {
+            c.disc.hidden = v
+                .split('x')
+                .map(|w| w.parse::<usize>().ok().filter(|&w| w > 0))
+                .collect::<Option<Vec<_>>>()
+                .ok_or_else(bad)?;
+            continue;
+        }
         let v: f64 = v.parse().map_err(|_| bad())?;
         match k {
             "gp" => c.grad_penalty = v,
@@ -201,6 +211,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut scaled: Option<(String, f32)> = None;
     let mut masked: Vec<String> = Vec::new();
     let mut holdout: Option<String> = None;
+    let mut mirror = false;
     let mut first_variant = 5;
     for arg in &args[5..] {
         if let Some(s) = arg.strip_prefix("scale=") {
@@ -212,6 +223,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             masked = s.split('+').map(str::to_string).collect();
         } else if let Some(s) = arg.strip_prefix("holdout=") {
             holdout = Some(s.to_string());
+        } else if arg == "mirror" {
+            mirror = true;
         } else {
             break;
         }
@@ -346,6 +359,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             zero_columns(&mut rows, dim, &zeroed);
             (rest, Some(rows))
         }
+    };
+    let demo = if mirror {
+        let demo = demo.with_mirrors()?;
+        let names: Vec<&str> = demo.clips().map(|(n, _)| n).collect();
+        println!(
+            "fresh discriminators' demo with mirrors: {}",
+            names.join(", ")
+        );
+        demo
+    } else {
+        demo
     };
     let mut demo_rng = SplitMix64::new(7);
     let mut draw = || demo_rng.next_f64();

@@ -302,6 +302,27 @@ impl DemoMotion {
         })
     }
 
+    /// These clips and, after them, each clip's left–right mirror image (named `NAME~mirror`):
+    /// the same motion seen in a mirror across the character's sagittal plane, left and right
+    /// limbs exchanged. A demo set of a few walks holds each walk's asymmetries on one side only;
+    /// the mirrors give a discriminator both. Refuses a character that is not left–right
+    /// symmetric ([`mirror_map`]).
+    pub fn with_mirrors(&self) -> Result<Self, MotionError> {
+        let map = mirror_map(&self.model)?;
+        let mirrors: Vec<DemoClip> = self
+            .clips
+            .iter()
+            .map(|c| DemoClip {
+                name: format!("{}~mirror", c.name),
+                poses: c.poses.iter().map(|p| mirror_pose(p, &map)).collect(),
+                ..c.clone()
+            })
+            .collect();
+        let mut out = self.clone();
+        out.clips.extend(mirrors);
+        Ok(out)
+    }
+
     /// Width of one sampled row: `window.frames × amp_frame_dim(model)`, as `TaskEnv::amp_dim`.
     pub fn feature_dim(&self) -> usize {
         self.window.frames * amp_frame_dim(&self.model)
@@ -537,6 +558,72 @@ impl GroundMove {
 
 /// World-frame angular velocity turning `from` into `to` in `dt`: the relative rotation
 /// `to · from⁻¹` as a scaled axis, the short way round.
+/// For every body of `model`, the body its left–right mirror image lands on: `left_X` and
+/// `right_X` exchange, every other body maps onto itself. Refuses (naming the body) a `left_`
+/// body without its `right_` twin or the other way round, a pair whose parents are not each
+/// other's mirror, and a body whose offset from its parent is not its mirror's with the lateral
+/// (y) component negated, since then the mirror of a pose is no pose of the same character.
+pub fn mirror_map(model: &CharacterModel) -> Result<Vec<usize>, MotionError> {
+    let file = format!("character {}", model.name);
+    let refuse = |message: String| MotionError::Corrupt {
+        file: file.clone(),
+        message: format!("not left-right symmetric: {message}"),
+    };
+    let mut map = Vec::with_capacity(model.bodies.len());
+    for b in &model.bodies {
+        let twin = if let Some(rest) = b.name.strip_prefix("left_") {
+            Some(format!("right_{rest}"))
+        } else {
+            b.name
+                .strip_prefix("right_")
+                .map(|rest| format!("left_{rest}"))
+        };
+        let index = match twin {
+            Some(t) => model
+                .body_index(&t)
+                .ok_or_else(|| refuse(format!("{} has no {t}", b.name)))?,
+            None => map.len(),
+        };
+        map.push(index);
+    }
+    for (i, b) in model.bodies.iter().enumerate() {
+        let twin = &model.bodies[map[i]];
+        if b.parent.map(|p| map[p]) != twin.parent {
+            return Err(refuse(format!(
+                "the parents of {} and {} are not each other's mirror",
+                b.name, twin.name
+            )));
+        }
+        let mirrored = [twin.pos[0], -twin.pos[1], twin.pos[2]];
+        // The root's position is the pose's, not the model's.
+        if b.parent.is_some()
+            && b.pos
+                .iter()
+                .zip(mirrored)
+                .any(|(a, m)| (a - m).abs() > 1e-6)
+        {
+            return Err(refuse(format!(
+                "{} sits at {:?} in its parent, its mirror {} at {:?}",
+                b.name, b.pos, twin.name, twin.pos
+            )));
+        }
+    }
+    Ok(map)
+}
+
+/// `pose` seen in a mirror across the world's x–z plane, bodies exchanged by `map`
+/// ([`mirror_map`]): positions have y negated, and a rotation about axis (x, y, z) by θ becomes
+/// one about (−x, y, −z) by θ (the reflection's conjugate), root and joints alike.
+pub fn mirror_pose(pose: &KinematicPose, map: &[usize]) -> KinematicPose {
+    let reflect = |q: Rotation| Rotation::from_xyzw(-q.x, q.y, -q.z, q.w);
+    let p = pose.root_pos;
+    KinematicPose {
+        root_pos: Vector::new(p.x, -p.y, p.z),
+        root_rot: reflect(pose.root_rot),
+        local_rots: map.iter().map(|&b| reflect(pose.local_rots[b])).collect(),
+    }
+}
+
 fn angular_velocity(from: Rotation, to: Rotation, dt: f32) -> Vector {
     let mut d = (to * from.inverse()).normalize();
     if d.w < 0.0 {
@@ -657,6 +744,115 @@ mod tests {
         };
         let axis = Vector::from_array(model.dofs[dof].axis.map(|a| a as f32));
         (shin, dof, axis)
+    }
+
+    /// A pose with the root and every joint turned some arbitrary way.
+    fn twisted_pose(model: &CharacterModel, seed: u64) -> KinematicPose {
+        let mut rng = SplitMix64::new(seed);
+        let mut turn = || {
+            let mut u = || rng.unit() as f32 * 2.0 - 1.0;
+            let axis = Vector::new(u(), u(), u()).normalize_or(Vector::Z);
+            Rotation::from_axis_angle(axis, u() * 1.5)
+        };
+        KinematicPose {
+            root_pos: Vector::new(0.4, 1.3, 0.9),
+            root_rot: turn(),
+            local_rots: (0..model.bodies.len()).map(|_| turn()).collect(),
+        }
+    }
+
+    #[test]
+    fn a_mirrored_pose_puts_each_body_where_the_mirror_shows_its_twin() {
+        let m = CharacterModel::amp_humanoid();
+        let map = mirror_map(&m).expect("the shipped humanoid is symmetric");
+        let foot = |side: &str| m.body_index(&format!("{side}_foot")).expect("foot");
+        assert_eq!(map[foot("left")], foot("right"));
+        assert_eq!(map[foot("right")], foot("left"));
+        let torso = m.body_index("torso").expect("torso");
+        assert_eq!(map[torso], torso);
+        for seed in 1..4 {
+            let pose = twisted_pose(&m, seed);
+            let seen = forward_kinematics(&m, &pose);
+            let mirrored = forward_kinematics(&m, &mirror_pose(&pose, &map));
+            for (i, &(pos, rot)) in mirrored.iter().enumerate() {
+                let (tpos, trot) = seen[map[i]];
+                let want = Vector::new(tpos.x, -tpos.y, tpos.z);
+                assert!(
+                    (pos - want).length() < 1e-4,
+                    "{}: {pos} vs {want}",
+                    m.bodies[i].name
+                );
+                // Each body axis is the mirror of its twin's: x and z flip their y component,
+                // and y (the reflection's normal direction) keeps only its y component's sign.
+                let flip = |v: Vector| Vector::new(v.x, -v.y, v.z);
+                for (axis, sign) in [(Vector::X, 1.0), (Vector::Y, -1.0), (Vector::Z, 1.0)] {
+                    let got = rot * axis;
+                    let want = flip(trot * axis) * sign;
+                    assert!(
+                        (got - want).length() < 1e-4,
+                        "{} axis {axis}",
+                        m.bodies[i].name
+                    );
+                }
+            }
+            let back = mirror_pose(&mirror_pose(&pose, &map), &map);
+            assert!((back.root_pos - pose.root_pos).length() < 1e-6);
+            for (a, b) in back.local_rots.iter().zip(&pose.local_rots) {
+                assert!(a.dot(*b).abs() > 1.0 - 1e-6, "mirrored twice is the pose");
+            }
+        }
+    }
+
+    #[test]
+    fn a_character_that_is_not_symmetric_has_no_mirror() {
+        let mut m = CharacterModel::amp_humanoid();
+        let thigh = m.body_index("left_thigh").expect("thigh");
+        m.bodies[thigh].pos[1] += 0.01;
+        let e = mirror_map(&m).expect_err("asymmetric").to_string();
+        assert!(e.contains("left_thigh") && e.contains("symmetric"), "{e}");
+        let mut m = CharacterModel::amp_humanoid();
+        m.bodies[thigh].name = "left_leg".into();
+        let e = mirror_map(&m).expect_err("no twin").to_string();
+        assert!(e.contains("right_thigh has no left_thigh"), "{e}");
+    }
+
+    #[test]
+    fn mirrored_clips_follow_the_clips_and_walk_the_other_way_round() {
+        let m = CharacterModel::amp_humanoid();
+        // A root gliding forward and to the left, turning left.
+        let poses: Vec<KinematicPose> = (0..8)
+            .map(|k| {
+                let t = k as f32 * DT;
+                let mut p = twisted_pose(&m, 9);
+                p.root_pos = Vector::new(t, 0.5 * t, 0.9);
+                p.root_rot = Rotation::from_rotation_z(0.3 * t);
+                p
+            })
+            .collect();
+        let demo =
+            DemoMotion::from_clips(&m, vec![("walk".into(), poses, DT)], window(2)).expect("valid");
+        let both = demo.with_mirrors().expect("symmetric");
+        let names: Vec<&str> = both.clips().map(|(n, _)| n).collect();
+        assert_eq!(names, ["walk", "walk~mirror"]);
+        let (a, b) = (both.amp_frame_at(0, 0.1), both.amp_frame_at(1, 0.1));
+        // Root height the same; in the heading frame the sideways velocity and the yaw rate
+        // change sign, the forward velocity does not.
+        assert!((a[0] - b[0]).abs() < 1e-5);
+        let (vel, ang) = (7, 10);
+        assert!((a[vel] - b[vel]).abs() < 1e-4, "{} vs {}", a[vel], b[vel]);
+        assert!(
+            (a[vel + 1] + b[vel + 1]).abs() < 1e-4,
+            "{} vs {}",
+            a[vel + 1],
+            b[vel + 1]
+        );
+        assert!(
+            (a[ang + 2] + b[ang + 2]).abs() < 1e-4,
+            "{} vs {}",
+            a[ang + 2],
+            b[ang + 2]
+        );
+        assert!(a[vel + 1].abs() > 0.1, "the clip moves sideways");
     }
 
     #[test]
