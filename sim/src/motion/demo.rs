@@ -556,8 +556,6 @@ impl GroundMove {
     }
 }
 
-/// World-frame angular velocity turning `from` into `to` in `dt`: the relative rotation
-/// `to · from⁻¹` as a scaled axis, the short way round.
 /// For every body of `model`, the body its left–right mirror image lands on: `left_X` and
 /// `right_X` exchange, every other body maps onto itself. Refuses (naming the body) a `left_`
 /// body without its `right_` twin or the other way round, a pair whose parents are not each
@@ -624,6 +622,8 @@ pub fn mirror_pose(pose: &KinematicPose, map: &[usize]) -> KinematicPose {
     }
 }
 
+/// World-frame angular velocity turning `from` into `to` in `dt`: the relative rotation
+/// `to · from⁻¹` as a scaled axis, the short way round.
 fn angular_velocity(from: Rotation, to: Rotation, dt: f32) -> Vector {
     let mut d = (to * from.inverse()).normalize();
     if d.w < 0.0 {
